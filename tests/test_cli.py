@@ -1,0 +1,210 @@
+"""The ``wpbench`` command line: the installed console script, run as a user would."""
+
+from __future__ import annotations
+
+import importlib.util
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import pytest
+import typer
+from typer.testing import CliRunner
+
+import wpbench.cli as cli
+from wpbench.cli.choices import check_choice, choice_callback
+from wpbench.evaluation.summary import summarize, write_summary
+
+
+def run_wpbench(exe: Path, *args: str, cwd: Path | None = None, timeout: float = 120):
+    return subprocess.run(
+        [str(exe), *args], capture_output=True, text=True, timeout=timeout, cwd=cwd, stdin=subprocess.DEVNULL
+    )
+
+
+def write_one_summary(results: Path, policy: str = "wp", task: str = "open") -> None:
+    record = {
+        "episode": 0, "seed": 0, "task": task, "policy": policy, "object_id": "o", "category": "oven",
+        "success": True, "rot_err_deg": 1.0, "trans_err_m": 0.01, "point_err_m": 0.01, "point_mse": 1e-4,
+    }
+    write_summary(results / policy, summarize([record], {"split": "val", "asset_source": "procedural"}))
+
+
+# --- the real console script ---------------------------------------------------
+
+
+def test_help_lists_the_command_groups(wpbench_exe):
+    result = run_wpbench(wpbench_exe, "--help")
+    assert result.returncode == 0, result.stderr
+    assert "Usage: wpbench" in result.stdout
+    for name in ("bench", "leaderboard"):
+        assert f"  {name} " in result.stdout
+    # Groups written by others appear exactly when their module exists.
+    for entry in cli.LAZY_COMMANDS:
+        exists = importlib.util.find_spec(entry.module) is not None
+        assert (f"  {entry.name} " in result.stdout) == exists, entry.name
+
+
+def test_help_does_not_import_torch_or_sapien(repo_root):
+    probe = (
+        "import sys\n"
+        "sys.argv = ['wpbench', '--help']\n"
+        "from wpbench.cli import main\n"
+        "try:\n    main()\nexcept SystemExit:\n    pass\n"
+        "heavy = sorted(m for m in ('torch', 'sapien', 'mani_skill', 'pandas', 'matplotlib') if m in sys.modules)\n"
+        "print('HEAVY=' + ','.join(heavy))\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, cwd=repo_root
+    )
+    assert result.returncode == 0, result.stderr
+    assert "HEAVY=\n" in result.stdout, result.stdout
+
+
+def test_bench_help_lists_benchmarks(wpbench_exe):
+    result = run_wpbench(wpbench_exe, "bench", "--help")
+    assert result.returncode == 0, result.stderr
+    for name in ("svd", "models", "episodes"):
+        assert name in result.stdout
+
+
+def test_unknown_subcommand_fails_with_a_suggestion(wpbench_exe):
+    result = run_wpbench(wpbench_exe, "leaderbord")
+    assert result.returncode == 2
+    assert "No such command 'leaderbord'" in result.stderr
+    assert "Did you mean 'leaderboard'" in result.stderr
+
+
+def test_unknown_choice_is_one_line_listing_the_valid_names(wpbench_exe, tmp_results):
+    result = run_wpbench(wpbench_exe, "leaderboard", "--results", str(tmp_results), "--sort-by", "speed")
+    assert result.returncode == 2
+    error_lines = [line for line in result.stderr.splitlines() if line.startswith("Error")]
+    assert error_lines == [
+        "Error: Invalid value for '--sort-by': unknown sort key 'speed'; valid: policy, rot, success, task, trans"
+    ]
+
+
+def test_leaderboard_command_writes_the_three_files(wpbench_exe, tmp_results):
+    write_one_summary(tmp_results, "wp")
+    write_one_summary(tmp_results, "identity")
+    result = run_wpbench(wpbench_exe, "leaderboard", "--results", str(tmp_results))
+    assert result.returncode == 0, result.stderr
+    for name in ("leaderboard.md", "leaderboard.csv", "leaderboard.png"):
+        assert (tmp_results / name).stat().st_size > 0
+    assert "`identity`" in result.stdout and "(2 runs)" in result.stdout
+
+
+def test_leaderboard_command_on_empty_results_says_what_to_do(wpbench_exe, tmp_results):
+    result = run_wpbench(wpbench_exe, "leaderboard", "--results", str(tmp_results))
+    assert result.returncode == 1
+    assert "wpbench run" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+@pytest.mark.skipif(importlib.util.find_spec("wpbench.cli.run_cmd") is None, reason="wpbench run not written yet")
+def test_run_rejects_an_unknown_policy_listing_the_valid_ones(wpbench_exe, tmp_results):
+    result = run_wpbench(
+        wpbench_exe, "run", "--policy", "no-such-policy", "--task", "open-then-place", "--out", str(tmp_results),
+        timeout=300,
+    )
+    assert result.returncode != 0
+    assert "unknown policy 'no-such-policy'; valid:" in result.stderr
+    assert "gt" in result.stderr and "identity" in result.stderr
+
+
+# --- in-process: wiring of lazily imported commands ---------------------------
+
+
+@pytest.fixture
+def runner():
+    return CliRunner()
+
+
+def fake_module(monkeypatch, name: str, **attributes) -> types.ModuleType:
+    module = types.ModuleType(name)
+    for key, value in attributes.items():
+        setattr(module, key, value)
+    monkeypatch.setitem(sys.modules, name, module)
+    return module
+
+
+def test_bench_svd_passes_its_options_to_the_benchmark(runner, monkeypatch, tmp_path):
+    calls = []
+    fake_module(monkeypatch, "wpbench.bench.svd", run=lambda **kw: calls.append(kw))
+    out = tmp_path / "svd.json"
+    result = runner.invoke(cli.app, ["bench", "svd", "--batch", "8", "--points", "64", "--json", str(out)])
+    assert result.exit_code == 0, result.output
+    assert calls == [{"batch": 8, "points": 64, "json_path": out}]
+
+
+def test_bench_episodes_passes_only_what_the_benchmark_accepts(runner, monkeypatch):
+    calls = []
+
+    def run(policy=None, json_path=None):
+        calls.append((policy, json_path))
+
+    fake_module(monkeypatch, "wpbench.bench.episodes", run=run)
+    assert runner.invoke(cli.app, ["bench", "episodes", "--policy", "gt"]).exit_code == 0
+    assert calls == [("gt", None)]
+    refused = runner.invoke(cli.app, ["bench", "episodes", "--episodes", "3"])
+    assert refused.exit_code == 2 and "--episodes" in refused.output
+    assert len(calls) == 1
+
+
+def test_a_command_module_that_fails_to_import_reports_itself(runner, monkeypatch, tmp_path):
+    (tmp_path / "wpbench_broken_cmd_for_test.py").write_text("raise RuntimeError('half-written module')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    entry = cli.LazyCommand("broken", "wpbench_broken_cmd_for_test", "app", "A broken group.")
+    monkeypatch.setattr(cli, "LAZY_COMMANDS", (*cli.LAZY_COMMANDS, entry))
+    monkeypatch.setitem(cli._BY_NAME, "broken", entry)
+
+    listing = runner.invoke(cli.app, ["--help"])
+    assert listing.exit_code == 0 and "broken" in listing.output and "bench" in listing.output
+    result = runner.invoke(cli.app, ["broken", "anything"])
+    assert result.exit_code == 1
+    assert "half-written module" in result.output
+    # Other commands still work.
+    assert runner.invoke(cli.app, ["bench", "--help"]).exit_code == 0
+
+
+def test_a_plain_function_is_mounted_as_a_single_command(runner, monkeypatch):
+    seen = []
+
+    def hello(name: str = typer.Option("x")) -> None:
+        seen.append(name)
+
+    fake_module(monkeypatch, "wpbench_fake_hello_cmd", hello=hello)
+    entry = cli.LazyCommand("hello", "wpbench_fake_hello_cmd", "hello", "Say hello.")
+    monkeypatch.setattr(cli, "LAZY_COMMANDS", (*cli.LAZY_COMMANDS, entry))
+    monkeypatch.setitem(cli._BY_NAME, "hello", entry)
+    monkeypatch.setattr(cli, "_module_exists", lambda module: module in sys.modules or importlib.util.find_spec(module) is not None)
+    result = runner.invoke(cli.app, ["hello", "--name", "wp"])
+    assert result.exit_code == 0, result.output
+    assert seen == ["wp"]
+
+
+# --- choices -------------------------------------------------------------------
+
+
+def test_check_choice_accepts_valid_and_lists_sorted_valid_names_otherwise():
+    assert check_choice("policy", "wp", ["wp", "gt"]) == "wp"
+    with pytest.raises(typer.BadParameter) as raised:
+        check_choice("policy", "WP", ["wp", "identity", "gt"])
+    assert str(raised.value.message) == "unknown policy 'WP'; valid: gt, identity, wp"
+    with pytest.raises(typer.BadParameter, match=r"\(none available\)"):
+        check_choice("task", "open", [])
+
+
+def test_choice_callback_calls_the_registry_only_when_needed():
+    calls = []
+
+    def registry():
+        calls.append(1)
+        return ["val", "test"]
+
+    callback = choice_callback("split", registry)
+    assert callback(None) is None and calls == []
+    assert callback("val") == "val" and calls == [1]
+    with pytest.raises(typer.BadParameter, match="unknown split 'train'; valid: test, val"):
+        callback("train")

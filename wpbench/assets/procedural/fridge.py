@@ -1,0 +1,135 @@
+"""Fridges: tall insulated boxes with glass shelves and one or two side-hinged doors.
+
+Styles: ``single`` (one full-height door), ``top_freezer`` (a freezer door above the
+fridge door, same hinge side, a thick divider between the compartments; the fridge
+door is the target) and ``french`` (two half-width doors hinged at the outer edges;
+one of them is the target). Doors open between 100 and 180 degrees.
+In-region: the shelf compartment behind the target door whose middle is nearest a
+comfortable reach height (0.9 m); for French doors only the half behind the target door.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wpbench.assets.procedural import parts as P
+from wpbench.assets.procedural.blueprint import MIN_CAVITY_EXTENT, Blueprint, ModelBuilder, choose, uniform
+
+STYLES = ("single", "top_freezer", "french")
+
+
+@dataclass(frozen=True)
+class FridgeRanges:
+    width_single: tuple[float, float] = (0.60, 0.75)
+    width_french: tuple[float, float] = (0.75, 0.90)
+    depth: tuple[float, float] = (0.60, 0.75)
+    height: tuple[float, float] = (1.20, 1.80)
+    wall: tuple[float, float] = (0.04, 0.06)
+    door_thickness: tuple[float, float] = (0.05, 0.08)
+    foot_height: tuple[float, float] = (0.02, 0.05)
+    freezer_fraction: tuple[float, float] = (0.25, 0.33)
+    open_angle_deg: tuple[float, float] = (100.0, 180.0)
+    door_mass: tuple[float, float] = (4.0, 8.0)
+    min_compartment: float = 0.24  # height between shelves, so a 16 cm block fits with margin
+    reach_height: float = 0.9
+
+
+def _shelves(rng, z0: float, z1: float, min_gap: float, max_count: int = 4) -> list[float]:
+    """z of shelf bottoms splitting [z0, z1] into compartments of at least ``min_gap``."""
+    room = int((z1 - z0) // (min_gap + 0.02)) - 1
+    n = int(rng.integers(1, max(1, min(room, max_count)) + 1)) if room >= 1 else 0
+    if n == 0:
+        return []
+    spacing = (z1 - z0) / (n + 1)
+    jitter = max(0.0, (spacing - min_gap - 0.02) / 2)
+    return [round(z0 + spacing * (k + 1) + float(rng.uniform(-jitter, jitter)), 4) for k in range(n)]
+
+
+def build(rng: np.random.Generator, object_id: str, ranges: FridgeRanges = FridgeRanges()) -> Blueprint:
+    style = choose(rng, STYLES)
+    W = uniform(rng, *(ranges.width_french if style == "french" else ranges.width_single))
+    D, H = uniform(rng, *ranges.depth), uniform(rng, *ranges.height)
+    wall, door_t = uniform(rng, *ranges.wall), uniform(rng, *ranges.door_thickness)
+    foot_h = uniform(rng, *ranges.foot_height)
+    finish = choose(rng, (P.STAINLESS, P.WHITE, P.WHITE, P.BLACK))
+    handle_colour = P.CHROME if finish != P.BLACK else P.MID_GREY
+    gap, xf = 0.004, D / 2
+    b = ModelBuilder(object_id, "refrigerator_body")
+
+    b.add_body(P.feet((-D / 2, D / 2), (-W / 2, W / 2), foot_h, 0.05, bool(rng.random() < 0.5), P.BLACK))
+    b.add_body(P.box_from_bounds((xf - 0.03, -W / 2 + 0.02, 0.0 + foot_h * 0.2), (xf - 0.005, W / 2 - 0.02, foot_h), P.BLACK, collide=False))
+    walls, inside = P.open_front_shell((-D / 2, -W / 2, foot_h), (xf, W / 2, foot_h + H), wall, wall, P.WHITE)
+    b.add_body(walls)
+
+    fridge_lo, fridge_hi = inside[0, 2], inside[1, 2]
+    door_specs = []  # (hinge, y_range, z_range, is_target)
+    hinge = "left" if rng.random() < 0.5 else "right"
+    top = foot_h + H
+    if style == "top_freezer":
+        inner_h = inside[1, 2] - inside[0, 2]
+        div_t = wall
+        div_lo = inside[1, 2] - inner_h * uniform(rng, *ranges.freezer_fraction)
+        b.add_body(P.box_from_bounds((inside[0, 0], inside[0, 1], div_lo), (xf, inside[1, 1], div_lo + div_t), P.WHITE))
+        fridge_hi = div_lo
+        split_z = div_lo + div_t / 2
+        door_specs.append((hinge, (-W / 2, W / 2), (foot_h, split_z - gap / 2), True))
+        door_specs.append((hinge, (-W / 2, W / 2), (split_z + gap / 2, top), False))
+    elif style == "french":
+        target_left = bool(rng.random() < 0.5)
+        # While a door turns, its inner back corner first moves sideways by up to
+        # t^2 / (2 w) before it clears the neighbour; the centre gap leaves room for that.
+        mid_gap = door_t**2 / (W / 2) + 0.004
+        door_specs.append(("left", (-W / 2, -mid_gap / 2), (foot_h, top), target_left))
+        door_specs.append(("right", (mid_gap / 2, W / 2), (foot_h, top), not target_left))
+    else:
+        door_specs.append((hinge, (-W / 2, W / 2), (foot_h, top), True))
+
+    shelf_t = uniform(rng, 0.006, 0.012)
+    shelf_bottoms = _shelves(rng, fridge_lo, fridge_hi, ranges.min_compartment)
+    for z in shelf_bottoms:
+        b.add_body(P.box_from_bounds((inside[0, 0], inside[0, 1], z), (xf - 0.03, inside[1, 1], z + shelf_t), (0.75, 0.85, 0.88, 1.0)))
+    # Compartments between floor, shelves and ceiling; keep the one nearest reach height.
+    floors = [fridge_lo] + [z + shelf_t for z in shelf_bottoms]
+    ceilings = shelf_bottoms + [fridge_hi]
+    compartments = [(lo, hi) for lo, hi in zip(floors, ceilings) if hi - lo >= MIN_CAVITY_EXTENT]
+    lo, hi = min(compartments, key=lambda c: abs((c[0] + c[1]) / 2 - ranges.reach_height))
+
+    open_angle = round(float(np.deg2rad(rng.uniform(*ranges.open_angle_deg))), 4)
+    handle_kind = choose(rng, ("bar", "bar", "recessed", "knob"))
+    target = None
+    for d_hinge, y_range, z_range, is_target in door_specs:
+        door = P.hinged_door(d_hinge, xf, y_range, z_range, door_t, gap, finish)
+        y0, y1 = y_range
+        free_y = y1 - 0.05 if d_hinge == "left" else y0 + 0.05
+        z0, z1 = z_range
+        door_h = z1 - z0
+        if style == "top_freezer":
+            hz = z0 + 0.75 * door_h if is_target else z0 + 0.3 * door_h
+        else:
+            hz = z0 + 0.6 * door_h
+        length = min(0.6, door_h * 0.5)
+        handle = P.make_handle(handle_kind, door.outer_x, free_y, hz, "z", length, handle_colour,
+                               standoff=0.045, radius=0.012)
+        link, joint = b.add_moving([door.slab, *handle.parts], "revolute", door.origin, door.axis, open_angle,
+                                   uniform(rng, *ranges.door_mass), "hinge door")
+        if is_target:
+            target = (link, joint, d_hinge, handle)
+    link, joint, target_hinge, handle = target
+
+    y_lo, y_hi = inside[0, 1], inside[1, 1]
+    if style == "french":  # only the half behind the opened door is reachable
+        y_lo, y_hi = (y_lo, -0.01) if target_hinge == "left" else (0.01, y_hi)
+    in_region = np.array([[inside[0, 0], y_lo, lo], [xf, y_hi, hi]])
+    extra = {
+        "style": style,
+        "hinge": target_hinge,
+        "doors": len(door_specs),
+        "shelves": len(shelf_bottoms),
+        "handle_type": handle.kind,
+        "handle_grasp_point": list(handle.grasp_point),
+        "wall_thickness": wall,
+        "door_thickness": door_t,
+    }
+    return Blueprint(b.model(), link, joint, "revolute", open_angle, in_region, extra)

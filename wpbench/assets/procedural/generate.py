@@ -1,0 +1,150 @@
+"""Generate procedural furniture folders and a fixed train/val split.
+
+Each instance draws from its own numpy Generator seeded by (library seed, category,
+index), so an object does not change when other categories or counts change, and
+the same seed writes byte-identical files.
+"""
+
+from __future__ import annotations
+
+import json
+import zlib
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+import numpy as np
+
+from wpbench.assets.procedural import dishwasher, fridge, microwave, oven, safe, storage
+from wpbench.assets.procedural.blueprint import Blueprint, check_blueprint
+from wpbench.assets.procedural.writer import write_model
+from wpbench.assets.spec import FurnitureAsset, OrientedBox
+
+# Bump when a change to any builder changes the files it writes (cache keys use it).
+GENERATOR_VERSION = 1
+
+BUILDERS: dict[str, Callable[[np.random.Generator, str], Blueprint]] = {
+    "oven": oven.build,
+    "microwave": microwave.build,
+    "dishwasher": dishwasher.build,
+    "fridge": fridge.build,
+    "safe": safe.build,
+    "storage": storage.build,
+}
+CATEGORIES: tuple[str, ...] = tuple(BUILDERS)
+
+
+def check_category(category: str) -> None:
+    if category not in BUILDERS:
+        raise ValueError(f"unknown category {category!r}; valid categories: {', '.join(CATEGORIES)}")
+
+
+def instance_rng(seed: int, category: str, index: int) -> np.random.Generator:
+    """The generator for one instance; crc32 gives a category key stable across Python runs."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed), zlib.crc32(category.encode()), int(index)]))
+
+
+def object_id(category: str, index: int) -> str:
+    return f"{category}-{index:04d}"
+
+
+def build_blueprint(category: str, index: int, seed: int = 0) -> Blueprint:
+    """Build (in memory, nothing written) instance ``index`` of ``category``."""
+    check_category(category)
+    bp = BUILDERS[category](instance_rng(seed, category, index), object_id(category, index))
+    check_blueprint(bp)
+    return bp
+
+
+def generate_object(category: str, index: int, out: Path, seed: int = 0, split: str | None = None) -> FurnitureAsset:
+    """Write one object into ``out/<category>-<index>/`` and return its asset description."""
+    bp = build_blueprint(category, index, seed)
+    folder = Path(out) / bp.model.name
+    urdf = write_model(bp.model, folder)
+    low, high = bp.model.bounds()
+    region = bp.in_region
+    asset = FurnitureAsset(
+        object_id=bp.model.name,
+        category=category,
+        urdf=urdf,
+        scale=1.0,
+        target_link=bp.target_link,
+        target_joint=bp.target_joint,
+        joint_type=bp.joint_type,
+        closed_qpos=float(bp.closed_qpos),
+        open_qpos=float(bp.open_qpos),
+        in_region=OrientedBox(
+            center=tuple(round(float(v), 6) for v in (region[0] + region[1]) / 2),
+            half_extents=tuple(round(float(v), 6) for v in (region[1] - region[0]) / 2),
+        ),
+        bounds_low=tuple(round(float(v), 6) for v in low),
+        bounds_high=tuple(round(float(v), 6) for v in high),
+        front=(1.0, 0.0, 0.0),
+        source="procedural",
+        split=split,
+        extra=_plain(bp.extra),
+    )
+    asset.save(folder / "wpbench.json")
+    meta = {"category": category, "id": bp.model.name, "seed": int(seed), "index": int(index),
+            "generator": "wpbench.assets.procedural", "generator_version": GENERATOR_VERSION}
+    (folder / "meta.json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
+    return asset
+
+
+def _plain(value):
+    """JSON-friendly copy: numpy scalars to floats, tuples to lists, floats rounded."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in sorted(value.items())}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return round(float(value), 6)
+    return value
+
+
+def split_of(index: int, per_category: int, val_per_category: int) -> str:
+    """The last ``val_per_category`` indices of each category are validation."""
+    return "val" if index >= per_category - val_per_category else "train"
+
+
+def generate_library(
+    out: Path,
+    per_category: int = 16,
+    val_per_category: int = 4,
+    seed: int = 0,
+    categories: Iterable[str] | None = None,
+    progress: Callable[[Iterable], Iterable] | None = None,
+) -> list[FurnitureAsset]:
+    """Write ``per_category`` objects of each category into ``out`` plus ``split.json``.
+
+    ``split.json`` = {"train": [ids], "val": [ids], "seed": S, "per_category": N,
+    "val_per_category": V, "generator_version": G, "categories": [...]}.
+    ``progress`` optionally wraps the job list (e.g. ``tqdm``).
+    """
+    categories = tuple(categories) if categories is not None else CATEGORIES
+    for c in categories:
+        check_category(c)
+    if per_category < 1:
+        raise ValueError(f"per_category must be >= 1, got {per_category}")
+    if not 0 <= val_per_category < per_category:
+        raise ValueError(f"val_per_category must be in [0, per_category), got {val_per_category} with per_category={per_category}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    jobs = [(c, i) for c in categories for i in range(per_category)]
+    assets = []
+    for c, i in progress(jobs) if progress else jobs:
+        assets.append(generate_object(c, i, out, seed, split_of(i, per_category, val_per_category)))
+    split = {
+        "train": [a.object_id for a in assets if a.split == "train"],
+        "val": [a.object_id for a in assets if a.split == "val"],
+        "seed": int(seed),
+        "per_category": int(per_category),
+        "val_per_category": int(val_per_category),
+        "categories": list(categories),
+        "generator_version": GENERATOR_VERSION,
+    }
+    (out / "split.json").write_text(json.dumps(split, indent=2, sort_keys=True) + "\n")
+    return assets

@@ -1,0 +1,84 @@
+"""``wpbench bench``: speed and memory benchmarks that print tables.
+
+Each command imports its benchmark module (``wpbench.bench.*``, which pulls in
+torch and maybe SAPIEN) only when it runs. Timings are wall-clock on the current
+machine: on a shared CPU they are pessimistic, so compare numbers from one run.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+from pathlib import Path
+from types import ModuleType
+from typing import Any, Optional
+
+import typer
+
+app = typer.Typer(
+    help="Speed and memory benchmarks (each prints a table; --json also saves it).",
+    no_args_is_help=True,
+    add_completion=False,
+    rich_markup_mode=None,  # plain help, like the top-level `wpbench --help`
+)
+
+_JSON_HELP = "Also write the measurements to this JSON file."
+
+
+def _load(module_name: str) -> ModuleType:
+    """Import a benchmark module or exit with a one-line error saying why."""
+    try:
+        return importlib.import_module(module_name)
+    except ModuleNotFoundError as error:
+        if error.name and module_name.startswith(error.name):
+            typer.echo(f"Error: benchmark module {module_name} is not part of this checkout yet.", err=True)
+            raise typer.Exit(1) from error
+        raise
+
+
+def _call_with_supported(function: Any, **candidates: Any) -> Any:
+    """Call ``function`` with the keyword arguments its signature accepts.
+
+    Lets the CLI offer common options (policy, task, ...) while a benchmark
+    declares only what it uses; a given option it cannot use is an error, not
+    silently ignored.
+    """
+    parameters = inspect.signature(function).parameters
+    takes_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values())
+    accepted = {k: v for k, v in candidates.items() if takes_any or k in parameters}
+    unused = [k for k, v in candidates.items() if k not in accepted and v is not None]
+    if unused:
+        options = ", ".join("--" + name.replace("_", "-") for name in unused)
+        typer.echo(f"Error: this benchmark does not take {options}.", err=True)
+        raise typer.Exit(2)
+    return function(**accepted)
+
+
+@app.command()
+def svd(
+    batch: int = typer.Option(64, min=1, help="Batch size B of the weighted SVD."),
+    points: int = typer.Option(1024, min=3, help="Points per cloud N."),
+    json_path: Optional[Path] = typer.Option(None, "--json", help=_JSON_HELP),
+) -> None:
+    """Weighted Procrustes / weighted-pose SVD: time and memory vs batch and points."""
+    _load("wpbench.bench.svd").run(batch=batch, points=points, json_path=json_path)
+
+
+@app.command()
+def models(
+    json_path: Optional[Path] = typer.Option(None, "--json", help=_JSON_HELP),
+) -> None:
+    """Forward/backward time and parameter counts of TAX-Pose, Goal Flow, WeightedPose."""
+    _load("wpbench.bench.models").run(json_path=json_path)
+
+
+@app.command()
+def episodes(
+    policy: Optional[str] = typer.Option(None, help="Policy to time (default: the benchmark's choice)."),
+    task: Optional[str] = typer.Option(None, help="Task to time (default: the benchmark's choice)."),
+    episodes: Optional[int] = typer.Option(None, min=1, help="Number of episodes."),
+    json_path: Optional[Path] = typer.Option(None, "--json", help=_JSON_HELP),
+) -> None:
+    """Simulation throughput: time per episode, split into observe / predict / execute."""
+    module = _load("wpbench.bench.episodes")
+    _call_with_supported(module.run, policy=policy, task=task, episodes=episodes, json_path=json_path)

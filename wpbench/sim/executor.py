@@ -1,0 +1,144 @@
+"""The scripted executor: one for every policy, so that only the predicted
+cross-pose differs between policies.
+
+- Articulated: pick the joint value whose target-link pose best matches the
+  predicted cross-pose (least squares on the link's points, within the joint
+  limits), drive the joint there with a PD drive, simulate until still.
+- Free-floating: move the object to the predicted pose, release it, simulate
+  until it rests. Physics decides: a pose inside a wall is pushed out, and that
+  counts.
+
+A simulation that blows up (NaN, runaway velocities) ends as a failure with a
+reason; it never raises.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from sapien import physx
+from scipy.optimize import minimize_scalar
+
+from wpbench.sim.furniture import SceneFurniture
+from wpbench.sim.poses import matrix_to_pose, pose_to_matrix, transform_points
+
+MAX_SETTLE_SECONDS = 4.0
+STILL_STEPS = 20          # consecutive still steps that count as "at rest"
+JOINT_STILL_VEL = 1e-2    # rad/s or m/s
+BODY_STILL_LIN = 1e-2     # m/s
+BODY_STILL_ANG = 1e-1     # rad/s
+RUNAWAY_SPEED = 20.0      # m/s (or rad/s): nothing in these scenes moves that fast
+MAX_DEPENETRATION_SPEED = 0.5  # m/s: a pose inside a wall is pushed out gently, not launched
+
+
+@dataclass
+class ExecutionResult:
+    ok: bool                      # False when the simulation blew up or the pose was unusable
+    reason: str = ""
+    sim_seconds: float = 0.0
+    at_rest: bool = False
+    details: dict = field(default_factory=dict)
+
+
+def best_joint_value(furniture: SceneFurniture, cross_pose: np.ndarray, link_points: np.ndarray) -> float:
+    """argmin_q sum_i |T_pred p_i - L(q) L(q_now)^-1 p_i|^2 over the joint limits.
+
+    A coarse grid finds the basin (the cost is not convex in q for a revolute joint),
+    then a bounded scalar search refines it.
+    """
+    lo, hi = furniture.limits
+    now_inv = np.linalg.inv(furniture.target_link_pose())
+    local = transform_points(now_inv, link_points)
+    wanted = transform_points(cross_pose, link_points)
+
+    def cost_of(poses: np.ndarray) -> np.ndarray:
+        moved = np.einsum("kij,nj->kni", poses[:, :3, :3], local) + poses[:, None, :3, 3]
+        return ((moved - wanted) ** 2).sum(-1).mean(-1)
+
+    grid = np.linspace(lo, hi, 61)
+    costs = cost_of(furniture.target_link_pose_at(grid))
+    k = int(np.argmin(costs))
+    a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+    if b - a <= 0:
+        return float(grid[k])
+    res = minimize_scalar(
+        lambda q: float(cost_of(furniture.target_link_pose_at(np.array([q])))[0]),
+        bounds=(a, b), method="bounded", options={"xatol": 1e-5},
+    )
+    return float(res.x) if res.fun <= costs[k] else float(grid[k])
+
+
+def _blown_up(values: list[np.ndarray]) -> str:
+    for v in values:
+        if not np.all(np.isfinite(v)):
+            return "simulation blow-up: non-finite state"
+        if np.abs(v).max() > RUNAWAY_SPEED:
+            return f"simulation blow-up: runaway velocity {np.abs(v).max():.1f}"
+    return ""
+
+
+def simulate_until_still(
+    step: Callable[[], None],
+    timestep: float,
+    velocities: Callable[[], list[np.ndarray]],
+    is_still: Callable[[], bool],
+    max_seconds: float = MAX_SETTLE_SECONDS,
+) -> ExecutionResult:
+    """Step physics until ``is_still`` holds for STILL_STEPS steps, or time runs out."""
+    still = 0
+    n_max = int(round(max_seconds / timestep))
+    for n in range(1, n_max + 1):
+        step()
+        reason = _blown_up(velocities())
+        if reason:
+            return ExecutionResult(ok=False, reason=reason, sim_seconds=n * timestep)
+        still = still + 1 if is_still() else 0
+        if still >= STILL_STEPS:
+            return ExecutionResult(ok=True, sim_seconds=n * timestep, at_rest=True)
+    return ExecutionResult(ok=True, reason="did not come to rest", sim_seconds=n_max * timestep, at_rest=False)
+
+
+def execute_articulated(
+    furniture: SceneFurniture,
+    cross_pose: np.ndarray,
+    link_points: np.ndarray,
+    step: Callable[[], None],
+    timestep: float,
+) -> ExecutionResult:
+    """Drive the target joint to the value that best realises ``cross_pose``."""
+    q_cmd = best_joint_value(furniture, cross_pose, link_points)
+    furniture.drive_to(q_cmd)
+    result = simulate_until_still(
+        step,
+        timestep,
+        velocities=lambda: [furniture.articulation.get_qvel()],
+        is_still=lambda: abs(furniture.qvel) < JOINT_STILL_VEL,
+    )
+    result.details.update(q_command=q_cmd, q_final=furniture.qpos)
+    return result
+
+
+def execute_free(
+    body: physx.PhysxRigidDynamicComponent,
+    cross_pose: np.ndarray,
+    step: Callable[[], None],
+    timestep: float,
+) -> ExecutionResult:
+    """Teleport the free object by ``cross_pose``, release it and let it settle."""
+    goal = cross_pose @ pose_to_matrix(body.entity_pose)
+    body.set_max_depenetration_velocity(MAX_DEPENETRATION_SPEED)
+    body.entity.set_pose(matrix_to_pose(goal))
+    body.set_linear_velocity(np.zeros(3))
+    body.set_angular_velocity(np.zeros(3))
+    body.wake_up()
+    result = simulate_until_still(
+        step,
+        timestep,
+        velocities=lambda: [np.asarray(body.linear_velocity), np.asarray(body.angular_velocity), np.asarray(body.entity_pose.p)],
+        is_still=lambda: np.linalg.norm(body.linear_velocity) < BODY_STILL_LIN
+        and np.linalg.norm(body.angular_velocity) < BODY_STILL_ANG,
+    )
+    result.details.update(placed_pose=goal.tolist())
+    return result
