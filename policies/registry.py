@@ -15,6 +15,13 @@ from policies.base import Policy
 POLICIES: dict[str, str] = {
     "gt": "policies.gt:GroundTruthPolicy",
     "identity": "policies.identity:IdentityPolicy",
+    "gf": "policies.learned:GoalFlowPolicy",
+    "tp": "policies.learned:TaxPosePolicy",
+    "wp-og": "policies.learned:WeightedPoseOGPolicy",
+    "wp-postsvd": "policies.learned:WeightedPosePostSVDPolicy",
+    "wp-postsvd-t": "policies.learned:WeightedPosePostSVDTPolicy",
+    "wp": "policies.learned:BestWeightedPosePolicy",
+    "oracle": "policies.oracle:OraclePolicy",
 }
 
 

@@ -8,7 +8,11 @@ set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 VENV="${WPBENCH_VENV:-$here/.venv}"
-SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then
+  # Without a terminal (CI, make from a script) sudo must not wait for a password.
+  if [ -t 0 ]; then SUDO="sudo"; else SUDO="sudo -n"; fi
+fi
 export DEBIAN_FRONTEND=noninteractive
 
 log() { printf '[setup] %s\n' "$*" >&2; }
@@ -43,7 +47,19 @@ need_vulkan() {
   case "$v" in ""|22.*) return 0 ;; *) return 1 ;; esac
 }
 
+need_venv_module() {
+  # Debian splits `venv`/ensurepip into python3-venv; a fresh install lacks it.
+  local py="${PYTHON:-python3.11}"
+  command -v "$py" >/dev/null 2>&1 || py=python3
+  ! command -v "$py" >/dev/null 2>&1 || ! "$py" -c "import ensurepip, venv" >/dev/null 2>&1
+}
+
 if command -v apt-get >/dev/null 2>&1; then
+  if [ ! -x "$VENV/bin/python" ] && need_venv_module; then
+    log "installing python3 and python3-venv"
+    $SUDO apt-get update -qq
+    $SUDO apt-get install -y -qq python3 python3-venv >/dev/null
+  fi
   if need_vulkan || ! dpkg -s libvulkan1 >/dev/null 2>&1; then
     enable_backports
     $SUDO apt-get update -qq
@@ -57,12 +73,13 @@ fi
 # --- python environment ----------------------------------------------------
 PY="${PYTHON:-python3.11}"
 command -v "$PY" >/dev/null 2>&1 || PY=python3
+pip() { "$VENV/bin/python" -m pip "$@"; }
 if [ ! -x "$VENV/bin/python" ]; then
   log "creating virtualenv $VENV"
   "$PY" -m venv "$VENV"
+  # Only for a new venv: re-runs must not need the network.
+  pip install -q --upgrade pip >/dev/null
 fi
-pip() { "$VENV/bin/python" -m pip "$@"; }
-pip install -q --upgrade pip >/dev/null
 # torch first: the CPU build of 2.13.0 lies on this machine's disk; any other
 # request would download a multi-GB CUDA build.
 if ! "$VENV/bin/python" -c "import torch, sys; sys.exit(torch.__version__.split('+')[0] != '2.13.0')" 2>/dev/null; then

@@ -118,10 +118,12 @@ def test_rerunning_does_not_pick_up_its_own_outputs(populated_results):
 
 
 def test_out_dir_and_differing_splits_are_handled(populated_results, tmp_path):
-    add_run(populated_results, "open/wp-real", "wp", "open", 2, 5, split="test", assets="partnet-mobility")
+    add_run(populated_results, "open/wp-real", "wp", "open", 2, 5, split="test", assets="../shared/partnet-mobility")
     files = write_leaderboard(populated_results, out_dir=tmp_path / "board")
     assert files.csv.parent == tmp_path / "board" and files.png.exists()
-    assert "partnet-mobility" in files.markdown.read_text()
+    markdown = files.markdown.read_text()
+    assert "| partnet-mobility " in markdown and "../shared" not in markdown  # folder shown by name
+    assert "../shared/partnet-mobility" in files.csv.read_text()  # the csv keeps the full value
     assert not (populated_results / "leaderboard.md").exists()
 
 

@@ -15,7 +15,8 @@ away. On a voxel grid over the object (body frame, metres):
    voxels (so space below a lip at the opening counts too);
 4. the region is the largest axis-aligned box of whole free voxels inside the
    cavity (exhaustive over slab pairs along the shortest axis + largest
-   rectangle in a histogram), shrunk by a margin.
+   rectangle in a histogram), shrunk by a margin, its bottom then lowered
+   onto the supporting surface (:func:`drop_to_support`).
 
 A drawer has no body-side cavity of its own: its region is the open drawer's
 inner volume, found the same way from the drawer's pieces alone with the top
@@ -176,13 +177,68 @@ def largest_box(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     return lo + crop_lo, hi + crop_lo
 
 
-def _box_from_voxels(grid: VoxelGrid, lo: np.ndarray, hi: np.ndarray, margin: float) -> OrientedBox | None:
+def _box_from_voxels(
+    grid: VoxelGrid, lo: np.ndarray, hi: np.ndarray, margin: float, limit_high: np.ndarray
+) -> OrientedBox | None:
+    """Box of whole voxels [lo, hi) shrunk by ``margin``; the grid overhangs ``limit_high``, so clip to it."""
     low = grid.origin + lo * grid.size + margin
-    high = grid.origin + hi * grid.size - margin
+    high = np.minimum(grid.origin + hi * grid.size, limit_high) - margin
     if np.any(high <= low):
         return None
     center = (low + high) / 2
     return OrientedBox(center=tuple(float(v) for v in center), half_extents=tuple(float(v) for v in (high - low) / 2))
+
+
+def _vertical_extent(equations: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(bottom, top) z of a convex piece on vertical lines through ``xy`` (M, 2); bottom > top if missed."""
+    normals, offsets = equations[:, :3], equations[:, 3]
+    # Each face n . p + d <= 0 bounds z from above (n_z > 0) or below (n_z < 0) on a vertical line.
+    rhs = -(offsets[None, :] + xy @ normals[:, :2].T)  # (M, F): n_z z <= rhs
+    nz = normals[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bound = rhs / nz[None, :]
+    top = np.min(np.where(nz[None, :] > 1e-9, bound, np.inf), axis=1)
+    bottom = np.max(np.where(nz[None, :] < -1e-9, bound, -np.inf), axis=1)
+    side_ok = np.all(np.where(np.abs(nz)[None, :] <= 1e-9, rhs >= 0, True), axis=1)
+    return np.where(side_ok, bottom, np.inf), np.where(side_ok, top, -np.inf)
+
+
+def drop_to_support(box: OrientedBox, pieces: list[np.ndarray], quantile: float = 0.2) -> OrientedBox:
+    """Lower the box's bottom face onto the surface that holds up what is put in it.
+
+    The voxel search leaves the bottom up to ~2 voxels (+ margin) above the real
+    floor, because occupancy is conservative; an object released in the box
+    would then settle below it. On an 8 x 8 grid of vertical lines through the
+    box footprint, the support is the highest piece top below the box bottom;
+    the new bottom is a low quantile of those heights (an uneven floor, a
+    gap between pieces must not drag the box far down, hence not the minimum).
+    """
+    low = np.asarray(box.center) - np.asarray(box.half_extents)
+    high = np.asarray(box.center) + np.asarray(box.half_extents)
+    u = np.linspace(0.05, 0.95, 8)
+    xy = np.stack(np.meshgrid(low[0] + u * (high[0] - low[0]), low[1] + u * (high[1] - low[1]),
+                              indexing="ij"), axis=-1).reshape(-1, 2)
+    support = np.full(len(xy), -np.inf)
+    for vertices in pieces:
+        vmin, vmax = vertices.min(0), vertices.max(0)
+        if vmin[2] >= low[2] or np.any(vmax[:2] < low[:2]) or np.any(vmin[:2] > high[:2]):
+            continue
+        try:
+            equations = ConvexHull(vertices).equations
+        except (QhullError, ValueError):
+            continue
+        bottom, top = _vertical_extent(equations, xy)
+        hit = (bottom <= top) & (top <= low[2] + 1e-6)
+        support = np.where(hit, np.maximum(support, top), support)
+    found = support[np.isfinite(support)]
+    if len(found) == 0:
+        return box
+    floor = float(np.quantile(found, quantile))
+    if floor >= low[2]:
+        return box
+    low[2] = floor
+    return OrientedBox(center=tuple(float(v) for v in (low + high) / 2),
+                       half_extents=tuple(float(v) for v in (high - low) / 2), rotation=box.rotation)
 
 
 def door_cavity(
@@ -210,7 +266,8 @@ def door_cavity(
     counts[0] = 0
     cavity = labels == int(np.argmax(counts)) if counts.max() > 0 else np.zeros_like(released)
     found = largest_box(cavity)
-    return None if found is None else _box_from_voxels(grid, *found, config.margin)
+    box = None if found is None else _box_from_voxels(grid, *found, config.margin, np.asarray(high, float))
+    return None if box is None else drop_to_support(box, anchor_pieces)
 
 
 def drawer_inner_volume(
@@ -221,4 +278,5 @@ def drawer_inner_volume(
     grid = VoxelGrid.covering(all_vertices.min(0), all_vertices.max(0), config.cells_along_largest)
     inside = largest_component(enclosed(occupancy(drawer_pieces, grid), open_top=True))
     found = largest_box(inside)
-    return None if found is None else _box_from_voxels(grid, *found, config.margin)
+    box = None if found is None else _box_from_voxels(grid, *found, config.margin, all_vertices.max(0))
+    return None if box is None else drop_to_support(box, drawer_pieces)

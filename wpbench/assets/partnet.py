@@ -42,7 +42,7 @@ import numpy as np
 
 from wpbench.assets.cavity import CavityConfig, door_cavity, drawer_inner_volume
 from wpbench.assets.collision import CoacdConfig, CollisionBuildError, build_hollow_collision_urdf
-from wpbench.assets.spec import FurnitureAsset, OrientedBox
+from wpbench.assets.spec import FurnitureAsset
 
 # Typical largest side (metres) of the closed object, per wpbench category.
 # Ballpark real appliance/furniture sizes; the loader scale is this divided by
@@ -443,12 +443,12 @@ def load_partnet_object(
         target_link=target.link,
         target_joint=target.joint,
         joint_type="revolute" if target.is_door else "prismatic",
-        closed_qpos=float(closed_q),
+        closed_qpos=float(closed_q) + 0.0,  # + 0.0 turns a "-0.0" limit into 0.0
         open_qpos=float(open_q),
         in_region=region,
         bounds_low=tuple(float(v) for v in bounds_low),
         bounds_high=tuple(float(v) for v in bounds_high),
-        front=tuple(float(v) for v in front),
+        front=tuple(float(v) + 0.0 for v in front),
         source="partnet-mobility",
         split=None,
         extra={

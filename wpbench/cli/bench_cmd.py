@@ -37,21 +37,21 @@ def _load(module_name: str) -> ModuleType:
 
 
 def _call_with_supported(function: Any, **candidates: Any) -> Any:
-    """Call ``function`` with the keyword arguments its signature accepts.
+    """Call ``function`` with the options the user gave (``None`` = not given).
 
-    Lets the CLI offer common options (policy, task, ...) while a benchmark
-    declares only what it uses; a given option it cannot use is an error, not
-    silently ignored.
+    Options not given are left out so the benchmark's own defaults apply. A given
+    option the benchmark's signature does not take is an error, not silently
+    ignored.
     """
+    given = {k: v for k, v in candidates.items() if v is not None}
     parameters = inspect.signature(function).parameters
     takes_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values())
-    accepted = {k: v for k, v in candidates.items() if takes_any or k in parameters}
-    unused = [k for k, v in candidates.items() if k not in accepted and v is not None]
+    unused = [k for k in given if not takes_any and k not in parameters]
     if unused:
         options = ", ".join("--" + name.replace("_", "-") for name in unused)
         typer.echo(f"Error: this benchmark does not take {options}.", err=True)
         raise typer.Exit(2)
-    return function(**accepted)
+    return function(**given)
 
 
 @app.command()
@@ -74,11 +74,19 @@ def models(
 
 @app.command()
 def episodes(
-    policy: Optional[str] = typer.Option(None, help="Policy to time (default: the benchmark's choice)."),
-    task: Optional[str] = typer.Option(None, help="Task to time (default: the benchmark's choice)."),
-    episodes: Optional[int] = typer.Option(None, min=1, help="Number of episodes."),
+    episodes: Optional[int] = typer.Option(None, min=1, help="Episodes per task and observation mode."),
+    task: Optional[list[str]] = typer.Option(None, help="Task to time; repeat for several (default: all)."),
+    obs: Optional[list[str]] = typer.Option(None, help="Observation mode; repeat for several (default: all)."),
+    policy: Optional[str] = typer.Option(None, help="Policy to time, if the benchmark supports choosing one."),
     json_path: Optional[Path] = typer.Option(None, "--json", help=_JSON_HELP),
 ) -> None:
-    """Simulation throughput: time per episode, split into observe / predict / execute."""
+    """Simulation throughput: episodes per minute and peak memory per task."""
     module = _load("wpbench.bench.episodes")
-    _call_with_supported(module.run, policy=policy, task=task, episodes=episodes, json_path=json_path)
+    _call_with_supported(
+        module.run,
+        episodes=episodes,
+        tasks=tuple(task) if task else None,
+        obs_modes=tuple(obs) if obs else None,
+        policy=policy,
+        json_path=json_path,
+    )

@@ -154,6 +154,11 @@ def _fmt(value: float, digits: int) -> str:
     return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
 
 
+def _short_source(source: str) -> str:
+    """``procedural`` stays; a folder path shows as its last component."""
+    return Path(source).name or source if ("/" in source or os.sep in source) else source
+
+
 def _success_cell(row: Any) -> str:
     if not math.isfinite(row.success_rate):
         return "n/a"
@@ -183,7 +188,7 @@ def leaderboard_markdown(frame: "Any", skipped: list[Path] | tuple[Path, ...] = 
             row.task,
             f"`{row.policy}`",
             row.split,
-            row.asset_source,
+            _short_source(row.asset_source),
             _success_cell(row),
             f"{_fmt(row.rot_err_deg_mean, 2)} / {_fmt(row.rot_err_deg_median, 2)}",
             f"{_fmt(row.trans_err_m_mean, 4)} / {_fmt(row.trans_err_m_median, 4)}",
@@ -212,7 +217,7 @@ def _bar_labels(frame: "Any") -> list[str]:
     varying = [key for key in ("split", "asset_source") if frame[key].nunique() > 1]
     labels = []
     for row in frame.itertuples(index=False):
-        extra = [str(getattr(row, key)) for key in varying]
+        extra = [_short_source(str(getattr(row, key))) for key in varying]
         labels.append(row.policy + (f" ({', '.join(extra)})" if extra else ""))
     keyed = list(zip(frame["task"], labels))
     return [

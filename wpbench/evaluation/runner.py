@@ -58,7 +58,8 @@ def make_env(cfg: RunConfig):
 
     if cfg.task not in tasks.TASKS:
         raise ValueError(f"unknown task {cfg.task!r}; valid: {', '.join(tasks.TASKS)}")
-    split = None if cfg.assets != "procedural" and cfg.split in ("all", None) else cfg.split
+    # Real PartNet-Mobility folders have no split: every object is unseen furniture.
+    split = None if cfg.assets != "procedural" or cfg.split in ("all", None) else cfg.split
     return gym.make(
         tasks.TASKS[cfg.task],
         obs_mode=cfg.obs,
@@ -100,8 +101,10 @@ def run_episode(env, policy, seed: int, observer=None) -> dict[str, Any]:
         t_policy += time.perf_counter() - t1
         if observer is not None:
             observer.log_prediction(base, np_obs, transform, diagnostics)
+        t2 = time.perf_counter()
         obs, _, terminated, _, info = env.step(transform)
         result = dict(info["stage_result"])
+        result["exec_seconds"] = time.perf_counter() - t2
         if error:
             result["failure_reason"] = error
         if "w" in diagnostics:

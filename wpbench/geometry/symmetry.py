@@ -80,12 +80,13 @@ class Symmetry:
             raise ValueError("discrete must hold rotations (orthonormal, det = +1); reflections are not symmetries here")
         if _index_of(eye, discrete) is None:
             raise ValueError("discrete must include the identity; Symmetry.from_discrete adds it for you")
-        for first, second in itertools.product(discrete, discrete):
-            if _index_of(first @ second, discrete) is None:
-                raise ValueError(
-                    "discrete is not closed under composition (not a group); "
-                    "list every product of its rotations, or use a ready-made group such as Symmetry.cube()"
-                )
+        products = (discrete[:, None] @ discrete[None]).reshape(-1, 1, 3, 3)  # (K*K, 1, 3, 3)
+        distance = (products - discrete[None]).abs().flatten(2).amax(-1)  # (K*K, K)
+        if not bool((distance.amin(-1) < _TOLERANCE).all()):
+            raise ValueError(
+                "discrete is not closed under composition (not a group); "
+                "list every product of its rotations, or use a ready-made group such as Symmetry.cube()"
+            )
         axis = None if self.axis is None else _as_axis(self.axis)
         if axis is not None:
             images = discrete @ axis  # (K, 3)
@@ -123,8 +124,11 @@ class Symmetry:
 
     @classmethod
     def from_discrete(cls, mats: object) -> Symmetry:
-        """Group from a finite list of rotations (K, 3, 3); the identity is added if missing."""
-        rotations = torch.as_tensor(mats, dtype=torch.float64)
+        """Group from a finite list of rotations (K, 3, 3) (tensor, array or list of 3x3); the identity is added if missing."""
+        if isinstance(mats, (list, tuple)):
+            rotations = torch.stack([torch.as_tensor(m, dtype=torch.float64) for m in mats]) if mats else torch.zeros(0, 3, 3)
+        else:
+            rotations = torch.as_tensor(mats, dtype=torch.float64)
         if rotations.dim() == 2:
             rotations = rotations[None]
         eye = torch.eye(3, dtype=torch.float64)

@@ -93,15 +93,20 @@ class GoalFlowConfig:
 
     mixing_weight: shape of the mixing weight w its head predicts for
         WeightedPose: one per sample (the paper) or one per action point.
+    position_scale: factor on the centred action xyz fed to the flow head
+        (1 / typical object size in metres), so it sees unit-scale inputs.
     """
 
     encoder: DGCNNConfig = field(default_factory=DGCNNConfig)
     head_hidden: int = 64
     mixing_weight: MixingWeightMode = "per_sample"
+    position_scale: float = 10.0
 
     def __post_init__(self) -> None:
         if self.mixing_weight not in ("per_sample", "per_point"):
             raise ValueError(f"mixing_weight must be 'per_sample' or 'per_point', got {self.mixing_weight!r}")
+        if not self.position_scale > 0:
+            raise ValueError(f"position_scale must be > 0, got {self.position_scale}")
 
     @classmethod
     def reference(cls) -> GoalFlowConfig:

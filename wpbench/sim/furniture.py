@@ -52,6 +52,10 @@ class SceneFurniture:
         limits = np.array([j.get_limits()[0] for j in joints], dtype=np.float64)
         # Unlimited joints (knobs) rest at 0; limited ones at the end nearest 0.
         self.rest_qpos = np.clip(np.zeros(len(joints)), limits[:, 0], limits[:, 1])
+        closed_by_joint = self.asset.extra.get("closed_qpos_by_joint", {})
+        for i, name in enumerate(names):
+            if name in closed_by_joint:
+                self.rest_qpos[i] = float(closed_by_joint[name])
         self.rest_qpos[self.target_index] = self.asset.closed_qpos
         for j in joints:
             j.set_drive_properties(DRIVE_STIFFNESS, DRIVE_DAMPING, DRIVE_FORCE_LIMIT, "acceleration")

@@ -41,8 +41,8 @@ def build(rng: np.random.Generator, object_id: str, ranges: DishwasherRanges = D
 
     recess = 0.05
     b.add_body(P.box_from_bounds((-D / 2, -W / 2, 0.0), (xf - recess, W / 2, kick), P.BLACK))
-    walls, inside = P.open_front_shell((-D / 2, -W / 2, kick), (xf, W / 2, H), wall, wall, P.LIGHT_GREY)
-    b.add_body(walls)
+    walls, inside = P.open_front_shell((-D / 2, -W / 2, kick), (xf, W / 2, H), wall, wall, finish)
+    b.add_body(walls, P.interior_lining(inside, P.LIGHT_GREY))
 
     bar, rack_t = 0.006, 0.008
     rx0, rx1 = inside[0, 0] + 0.015, inside[1, 0] - 0.02

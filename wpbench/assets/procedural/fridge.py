@@ -60,8 +60,8 @@ def build(rng: np.random.Generator, object_id: str, ranges: FridgeRanges = Fridg
 
     b.add_body(P.feet((-D / 2, D / 2), (-W / 2, W / 2), foot_h, 0.05, bool(rng.random() < 0.5), P.BLACK))
     b.add_body(P.box_from_bounds((xf - 0.03, -W / 2 + 0.02, 0.0 + foot_h * 0.2), (xf - 0.005, W / 2 - 0.02, foot_h), P.BLACK, collide=False))
-    walls, inside = P.open_front_shell((-D / 2, -W / 2, foot_h), (xf, W / 2, foot_h + H), wall, wall, P.WHITE)
-    b.add_body(walls)
+    walls, inside = P.open_front_shell((-D / 2, -W / 2, foot_h), (xf, W / 2, foot_h + H), wall, wall, finish)
+    b.add_body(walls, P.interior_lining(inside, P.WHITE))
 
     fridge_lo, fridge_hi = inside[0, 2], inside[1, 2]
     door_specs = []  # (hinge, y_range, z_range, is_target)

@@ -58,6 +58,7 @@ def build(rng: np.random.Generator, object_id: str, ranges: MicrowaveRanges = Mi
     b.add_body(P.box_from_bounds((inside[0, 0], dy0, inside[0, 2]), (xf, dy1, inside[1, 2]), P.LIGHT_GREY))
     cav_y = (inside[0, 1], dy0) if sign > 0 else (dy1, inside[1, 1])
     cavity = np.array([[inside[0, 0], cav_y[0], inside[0, 2]], [xf, cav_y[1], inside[1, 2]]])
+    b.add_body(P.interior_lining(cavity, P.LIGHT_GREY))
 
     table_r = min(cavity[1, 0] - cavity[0, 0], cavity[1, 1] - cavity[0, 1]) / 2 - 0.02
     table_t = 0.008

@@ -50,8 +50,8 @@ def build(rng: np.random.Generator, object_id: str, ranges: OvenRanges = OvenRan
     b.add_body(P.box_from_bounds((xf, -W / 2 + 0.01, foot_h + 0.01), (xf + 0.002, W / 2 - 0.01, plinth_top - 0.01), trim, collide=False))
 
     shell_top = plinth_top + uniform(rng, *ranges.shell_height)
-    walls, inside = P.open_front_shell((-D / 2, -W / 2, plinth_top), (xf, W / 2, shell_top), wall, wall, P.DARK_GREY)
-    b.add_body(walls)
+    walls, inside = P.open_front_shell((-D / 2, -W / 2, plinth_top), (xf, W / 2, shell_top), wall, wall, finish)
+    b.add_body(walls, P.interior_lining(inside, P.DARK_GREY))
     cook_top = shell_top + uniform(rng, *ranges.cooktop_thickness)
     b.add_body(P.box_from_bounds((-D / 2, -W / 2, shell_top), (xf, W / 2, cook_top), finish))
     burner_r = min(W, D) * uniform(rng, 0.12, 0.16)

@@ -214,3 +214,21 @@ def wire_rack(low, high, bar: float, spacing: float, rgba: RGBA, rim_height: flo
 def boxes_overlap(a: np.ndarray, b: np.ndarray, tol: float = 1e-6) -> bool:
     """Do two (2, 3) axis-aligned bounds overlap by more than ``tol`` on every axis?"""
     return bool(np.all(np.minimum(a[1], b[1]) - np.maximum(a[0], b[0]) > tol))
+
+
+def interior_lining(inside, rgba: RGBA, skin: float = 0.001) -> list[Box]:
+    """Visual-only skins on the five inner faces of a cavity (``inside`` is (2, 3) bounds).
+
+    Lets the outside of a shell keep its finish while the cavity gets its own colour
+    (enamel, plastic liner...). No collision: the walls already collide.
+    """
+    (x0, y0, z0), (x1, y1, z1) = np.asarray(inside, float)
+    def skin_box(lo, hi):
+        return box_from_bounds(lo, hi, rgba, collide=False)
+    return [
+        skin_box((x0, y0, z0), (x0 + skin, y1, z1)),  # back
+        skin_box((x0, y0, z0), (x1, y1, z0 + skin)),  # floor
+        skin_box((x0, y0, z1 - skin), (x1, y1, z1)),  # ceiling
+        skin_box((x0, y0, z0), (x1, y0 + skin, z1)),  # side -y
+        skin_box((x0, y1 - skin, z0), (x1, y1, z1)),  # side +y
+    ]

@@ -43,7 +43,7 @@ def build(rng: np.random.Generator, object_id: str, ranges: SafeRanges = SafeRan
     b.add_body(walls)
     # A lighter lining makes the cavity readable in renders (visual only, on the walls).
     lining = (0.62, 0.52, 0.40, 1.0)
-    b.add_body(P.box_from_bounds((inside[0, 0], inside[0, 1], inside[0, 2]), (inside[0, 0] + 0.002, inside[1, 1], inside[1, 2]), lining, collide=False))
+    b.add_body(P.interior_lining(inside, lining))
 
     lo, hi = inside[0, 2], inside[1, 2]
     has_shelf = (hi - lo) >= 2 * ranges.min_compartment + 0.02 and rng.random() < 0.6

@@ -1,0 +1,47 @@
+# wpbench: every target first runs scripts/setup.sh, which is idempotent
+# (a few seconds when everything is in place), so any target works on a fresh
+# Debian 12 machine. Override variables on the command line, e.g.
+#   make run POLICY=gt TASK=open-door EPISODES=10
+#   make test PYTEST_ARGS="-k records"
+
+VENV        ?= .venv
+PYTHON      := $(VENV)/bin/python
+WPBENCH     := $(VENV)/bin/wpbench
+POLICY      ?= wp
+TASK        ?= open-then-place
+SPLIT       ?= val
+EPISODES    ?= 20
+RUN_ARGS    ?=
+RESULTS     ?= results
+PYTEST_ARGS ?=
+
+export WPBENCH_VENV := $(abspath $(VENV))
+
+.PHONY: help setup run test bench leaderboard
+
+help:
+	@echo "make run          set up, then evaluate POLICY=$(POLICY) on TASK=$(TASK) (SPLIT=$(SPLIT), EPISODES=$(EPISODES))"
+	@echo "make test         set up, then run the test suite"
+	@echo "make bench        set up, then print the speed benchmarks"
+	@echo "make leaderboard  rebuild $(RESULTS)/leaderboard.{md,csv,png} from every summary.json"
+	@echo "make setup        system packages + $(VENV) (idempotent)"
+
+setup:
+	@bash scripts/setup.sh
+
+run: setup
+	$(WPBENCH) run --policy $(POLICY) --task $(TASK) --split $(SPLIT) --episodes $(EPISODES) $(RUN_ARGS)
+	$(WPBENCH) leaderboard --results $(RESULTS) --quiet
+
+# pytest exits with 5 when it collected no tests: that is a failure here too.
+test: setup
+	@status=0; $(PYTHON) -m pytest -q -p no:cacheprovider $(PYTEST_ARGS) || status=$$?; \
+	if [ $$status -eq 5 ]; then echo "make test: pytest collected no tests" >&2; exit 1; fi; \
+	exit $$status
+
+bench: setup
+	$(WPBENCH) bench svd
+	$(WPBENCH) bench models
+
+leaderboard: setup
+	$(WPBENCH) leaderboard --results $(RESULTS)

@@ -1,0 +1,54 @@
+"""``oracle``: the switcher that knows the kind of goal (articulated or free-floating)
+from the ground truth and calls Goal Flow (``gf``) or TAX-Pose (``tp``) accordingly.
+
+It shows how far one could get by picking the right specialist every time,
+the bound WeightedPose's learned mixing weight is compared against.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+from policies.base import Policy, PolicyConfig, PolicyOutput
+
+KIND_NAMES = {0: "articulated", 1: "free-floating", "articulated": "articulated", "free-floating": "free-floating"}
+
+
+@dataclass
+class OracleConfig(PolicyConfig):
+    name: ClassVar[str] = "oracle"
+    articulated_policy: str = "gf"
+    free_policy: str = "tp"
+    weights_root: Path | None = None
+
+
+class OraclePolicy(Policy):
+    uses_ground_truth = True
+
+    def __init__(self, config: OracleConfig | None = None, **kwargs: Any) -> None:
+        from policies.learned import LearnedPolicy
+
+        self.config = config or OracleConfig(**kwargs)
+        self.experts = {
+            "articulated": LearnedPolicy(policy=self.config.articulated_policy, weights_root=self.config.weights_root),
+            "free-floating": LearnedPolicy(policy=self.config.free_policy, weights_root=self.config.weights_root),
+        }
+
+    def predict(self, obs: dict[str, Any], info: dict[str, Any] | None = None) -> PolicyOutput:
+        kind = (info or {}).get("kind", obs.get("kind"))
+        if hasattr(kind, "item"):
+            kind = kind.item()
+        if kind not in KIND_NAMES:
+            raise ValueError(f"oracle needs the ground-truth kind in info['kind'] or obs['kind'] "
+                             f"(0/'articulated' or 1/'free-floating'), got {kind!r}")
+        kind = KIND_NAMES[kind]
+        out = self.experts[kind].predict(obs)
+        out.diagnostics["oracle_choice"] = kind
+        return out
+
+    def describe(self) -> dict[str, Any]:
+        d = super().describe()
+        d["experts"] = {kind: expert.describe() for kind, expert in self.experts.items()}
+        return d

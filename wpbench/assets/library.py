@@ -1,0 +1,142 @@
+"""Find furniture: the built-in procedural library (generated once, cached) or a folder.
+
+``load_library("procedural", split="train")`` is what tasks call. The procedural
+library lives in ``$WPBENCH_CACHE/procedural/seed-<S>-n<N>-v<G>`` (``$WPBENCH_CACHE``
+defaults to ``~/.cache/wpbench``); it is generated into a temporary sibling folder
+and renamed into place, so a crash or a concurrent run never leaves a half-written
+library behind.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import logging
+import os
+import shutil
+import tempfile
+from collections.abc import Iterable
+from pathlib import Path
+
+from wpbench.assets.spec import FurnitureAsset
+
+log = logging.getLogger(__name__)
+
+SPLITS = ("train", "val")
+
+
+def cache_root() -> Path:
+    """``$WPBENCH_CACHE`` or ``~/.cache/wpbench``."""
+    env = os.environ.get("WPBENCH_CACHE")
+    return Path(env).expanduser() if env else Path.home() / ".cache" / "wpbench"
+
+
+def default_val_per_category(per_category: int) -> int:
+    """4 of 16 by default: a quarter, at least one when there are two or more instances."""
+    return 0 if per_category < 2 else max(1, per_category // 4)
+
+
+def procedural_library(seed: int = 0, per_category: int = 16, cache_dir: Path | None = None) -> Path:
+    """Folder of the procedural library for (seed, per_category), generating it on first use.
+
+    ``cache_dir`` replaces ``cache_root()``; the library goes to
+    ``<cache>/procedural/seed-<seed>-n<per_category>-v<generator version>``.
+    """
+    from wpbench.assets.procedural import GENERATOR_VERSION, generate_library
+
+    root = Path(cache_dir) if cache_dir is not None else cache_root()
+    folder = root / "procedural" / f"seed-{int(seed)}-n{int(per_category)}-v{GENERATOR_VERSION}"
+    if (folder / "split.json").is_file():
+        return folder
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.tmp-", dir=folder.parent))
+    try:
+        log.info("generating the procedural furniture library into %s", folder)
+        generate_library(tmp, per_category=per_category, val_per_category=default_val_per_category(per_category), seed=seed)
+        try:
+            os.rename(tmp, folder)
+        except OSError:
+            # Another process finished first: its library is identical (same seed), keep it.
+            if not (folder / "split.json").is_file():
+                raise
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    return folder
+
+
+def _check_names(kind: str, given: Iterable[str] | None, valid: Iterable[str]) -> None:
+    valid = sorted(set(valid))
+    for name in given or ():
+        if name not in valid:
+            raise ValueError(f"unknown {kind} {name!r}; valid {kind}s: {', '.join(valid) or '(none)'}")
+
+
+def _load_split_folder(folder: Path, split: str | None) -> list[FurnitureAsset]:
+    meta = json.loads((folder / "split.json").read_text())
+    ids = [(i, s) for s in SPLITS if split in (None, s) for i in meta.get(s, [])]
+    assets = []
+    for object_id, s in ids:
+        spec = folder / object_id / "wpbench.json"
+        if not spec.is_file():
+            raise FileNotFoundError(f"{spec} listed in {folder / 'split.json'} is missing; regenerate the library")
+        asset = FurnitureAsset.load(spec)
+        if asset.split != s:
+            from dataclasses import replace
+
+            asset = replace(asset, split=s)
+        assets.append(asset)
+    return assets
+
+
+def load_library(
+    source: str | Path = "procedural",
+    split: str | None = None,
+    categories: Iterable[str] | None = None,
+    seed: int = 0,
+    per_category: int = 16,
+) -> list[FurnitureAsset]:
+    """Furniture assets from ``source``.
+
+    Args:
+        source: "procedural" (the cached built-in library for ``seed``/``per_category``),
+            a folder with ``split.json`` and ``<id>/wpbench.json`` (a generated library),
+            or any other folder, read by ``wpbench.assets.partnet.load_partnet_folder``
+            (PartNet-Mobility objects; those that fail to load are logged and skipped).
+        split: "train", "val" or None for all. PartNet-Mobility objects carry no split:
+            the split is ignored for them (they are all held-out objects).
+        categories: keep only these categories (None: all).
+
+    Raises:
+        ValueError: unknown split or category (the message lists the valid ones), or a
+            folder with no furniture in it.
+    """
+    if split is not None and split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; valid splits: {', '.join(SPLITS)} (or None for all)")
+    categories = list(categories) if categories is not None else None
+    if isinstance(source, str) and source == "procedural":
+        from wpbench.assets.procedural import CATEGORIES
+
+        _check_names("category", categories, CATEGORIES)
+        folder = procedural_library(seed=seed, per_category=per_category)
+        assets = _load_split_folder(folder, split)
+    else:
+        folder = Path(source).expanduser()
+        if not folder.is_dir():
+            raise ValueError(f"asset source {str(source)!r} is neither 'procedural' nor an existing folder")
+        if (folder / "split.json").is_file():
+            assets = _load_split_folder(folder, split)
+        elif importlib.util.find_spec("wpbench.assets.partnet") is not None:
+            from wpbench.assets.partnet import load_partnet_folder
+
+            assets, errors = load_partnet_folder(folder)
+            for name, reason in sorted(errors.items()):
+                log.warning("skipped %s: %s", name, reason)
+            if split is not None and any(a.split is not None for a in assets):
+                assets = [a for a in assets if a.split == split]
+        else:
+            raise ValueError(f"{folder} has no split.json and the PartNet-Mobility loader is not available")
+        _check_names("category", categories, {a.category for a in assets})
+    if categories is not None:
+        assets = [a for a in assets if a.category in categories]
+    return assets

@@ -1,0 +1,55 @@
+"""``wpbench bench episodes``: episodes per minute and peak memory of each task
+and observation mode on this machine.
+
+Each (task, obs) cell runs in a fresh subprocess so its peak RSS is its own, with
+the ``gt`` policy (the cheapest policy: what is measured is the simulator, the
+camera and the executor).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+TASKS = ("open-door", "place-in", "open-then-place")
+OBS = ("camera", "mesh")
+
+_CHILD = r"""
+import json, resource, sys, time
+from pathlib import Path
+from wpbench.evaluation.runner import RunConfig, run_benchmark
+task, obs, episodes, out = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4]
+t0 = time.perf_counter()
+summary = run_benchmark(RunConfig(policy="gt", task=task, split="val", episodes=episodes, obs=obs, out=Path(out)), progress=False)
+wall = time.perf_counter() - t0
+print(json.dumps({"task": task, "obs": obs, "episodes": episodes, "wall_s": wall,
+                  "episodes_per_min": 60.0 * episodes / wall, "success_rate": summary["success_rate"],
+                  "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+"""
+
+
+def measure(task: str, obs: str, episodes: int) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        proc = subprocess.run([sys.executable, "-c", _CHILD, task, obs, str(episodes), str(Path(tmp) / "run")],
+                              capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"benchmark of {task}/{obs} failed:\n{proc.stderr[-2000:]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def run(episodes: int = 10, tasks: tuple[str, ...] = TASKS, obs_modes: tuple[str, ...] = OBS,
+        json_path: Path | None = None) -> list[dict]:
+    from tabulate import tabulate
+
+    rows = [measure(task, obs, episodes) for task in tasks for obs in obs_modes]
+    print(tabulate(
+        [[r["task"], r["obs"], r["episodes"], f"{r['episodes_per_min']:.1f}", f"{r['peak_rss_mib']:.0f}",
+          f"{r['success_rate']:.0%}"] for r in rows],
+        headers=["task", "obs", "episodes", "episodes/min", "peak RSS (MiB)", "gt success"],
+    ))
+    if json_path is not None:
+        Path(json_path).write_text(json.dumps(rows, indent=2) + "\n")
+    return rows

@@ -1,0 +1,69 @@
+"""``wpbench run``: evaluate one policy on one task in the simulator."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from wpbench.cli.choices import check_choice
+
+TASK_NAMES = ("open-door", "place-in", "open-then-place")
+SPLITS = ("train", "val", "all")
+OBS_MODES = ("camera", "mesh")
+
+
+def _policy_names() -> list[str]:
+    from policies.registry import available_policies
+
+    return available_policies()
+
+
+def run(
+    policy: str = typer.Option("wp", help="Policy name (see `wpbench run --policy list`)."),
+    task: str = typer.Option("open-then-place", help=f"One of: {', '.join(TASK_NAMES)}."),
+    split: str = typer.Option("val", help="Furniture split: train, val, or all."),
+    episodes: int = typer.Option(50, min=1, help="Number of episodes."),
+    seed: int = typer.Option(0, help="Run seed; episode i uses a seed derived from (seed, i)."),
+    assets: str = typer.Option("procedural", help="'procedural' (built-in furniture) or a PartNet-Mobility folder."),
+    obs: str = typer.Option("camera", help="Observation: camera (depth + segmentation) or mesh (surface samples)."),
+    out: Path = typer.Option(None, help="Output folder [default: results/runs/<policy>__<task>__<split>__<assets>__<obs>]."),
+    resume: bool = typer.Option(False, help="Skip episodes already written in --out."),
+    record: Path = typer.Option(None, help="Write a rerun recording (.rrd) of the run."),
+    num_action_points: int = typer.Option(256, min=8, help="Action-object points per observation."),
+    num_anchor_points: int = typer.Option(1024, min=8, help="Anchor-object points per observation."),
+    progress: bool = typer.Option(True, help="Show a progress bar."),
+) -> None:
+    """Run POLICY on TASK for N episodes: progress bar, summary table, episodes.jsonl and summary.json."""
+    if policy == "list":
+        typer.echo("\n".join(_policy_names()))
+        raise typer.Exit(0)
+    check_choice("policy", policy, _policy_names())
+    check_choice("task", task, TASK_NAMES)
+    check_choice("split", split, SPLITS)
+    check_choice("observation mode", obs, OBS_MODES)
+    if assets != "procedural" and not Path(assets).is_dir():
+        raise typer.BadParameter(f"--assets must be 'procedural' or an existing folder; {assets!r} is neither")
+    from wpbench.evaluation.runner import RunConfig, run_benchmark
+    from wpbench.evaluation.summary import format_summary_table
+
+    cfg = RunConfig(policy=policy, task=task, split=split, episodes=episodes, seed=seed, assets=assets,
+                    obs=obs, out=out, resume=resume, record=record, num_action_points=num_action_points,
+                    num_anchor_points=num_anchor_points)
+    observer = None
+    if record is not None:
+        from wpbench.evaluation.recording import RerunRecorder
+
+        observer = RerunRecorder(record, application=f"wpbench {policy} {task}")
+    try:
+        summary = run_benchmark(cfg, progress=progress, observer=observer)
+    except (ValueError, FileExistsError, FileNotFoundError) as err:
+        typer.echo(f"Error: {err}", err=True)
+        raise typer.Exit(2)
+    finally:
+        if observer is not None:
+            observer.close()
+    typer.echo(format_summary_table(summary))
+    typer.echo(f"results: {summary['_out_dir']}/episodes.jsonl, summary.json")
+    if record is not None:
+        typer.echo(f"recording: {record} (open with `rerun {record}`)")

@@ -1,0 +1,74 @@
+"""``wpbench train --policy NAME``: train a learned policy (see ``wpbench.training``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from wpbench.cli.choices import check_choice
+
+POLICY_NAMES = ("gf", "tp", "wp-og", "wp-postsvd", "wp-postsvd-t")
+
+
+def train(
+    policy: str = typer.Option(None, help=f"Policy to train: {', '.join(POLICY_NAMES)}."),
+    data: Path = typer.Option(Path("data"), help="Data root with train/ and val/ (from `wpbench data generate`)."),
+    minutes: float = typer.Option(20.0, min=0.01, help="Training wall-time budget in minutes (summed over resumes)."),
+    out: Path = typer.Option(None, help="Output folder [default: WEIGHTS_ROOT/<policy>]."),
+    weights_root: Path = typer.Option(Path("policies/weights"), help="Where trained policies live (warm starts, best.json)."),
+    batch_size: int = typer.Option(8, min=1, help="Samples per optimiser step."),
+    steps_per_epoch: int = typer.Option(40, min=1, help="Optimiser steps between validation + checkpoint."),
+    max_steps: int = typer.Option(None, min=1, help="Stop after this many optimiser steps (whatever the budget)."),
+    learning_rate: float = typer.Option(None, help="Adam learning rate [default: 1e-3 baselines, 3e-4 WeightedPose]."),
+    num_action_points: int = typer.Option(128, min=8, help="Action points per cloud in training (random subset)."),
+    num_anchor_points: int = typer.Option(512, min=8, help="Anchor points per cloud in training (random subset)."),
+    val_per_kind: int = typer.Option(32, min=1, help="Validation samples per kind after each epoch."),
+    final_val_per_kind: int = typer.Option(200, min=1, help="Validation samples per kind for metrics.json."),
+    threads: int = typer.Option(1, min=1, help="torch threads (1 when two trainings share the machine)."),
+    seed: int = typer.Option(0, help="Seed for initialisation, shuffling and augmentation."),
+    augment: bool = typer.Option(True, help="Random yaw of each training scene."),
+    restart: bool = typer.Option(False, help="Ignore an existing checkpoint and start from scratch."),
+    select_best: bool = typer.Option(False, "--select-best",
+                                     help="Do not train: write WEIGHTS_ROOT/best.json from the trained WeightedPose variants."),
+) -> None:
+    """Train POLICY on DATA; resumes from OUT/checkpoint.pt; writes model.pt, config.json, metrics.json,
+    train_log.csv and train_log.png into OUT."""
+    if select_best:
+        from wpbench.training.best import select_best as choose
+
+        best = choose(weights_root)
+        if best is None:
+            typer.echo(f"Error: no trained WeightedPose variant under {weights_root}; "
+                       "train one with `wpbench train --policy wp-postsvd-t`", err=True)
+            raise typer.Exit(2)
+        typer.echo(f"best: {best['policy']} ({best['criterion']}: {best['candidates']}) -> {weights_root}/best.json")
+        return
+    if policy is None:
+        raise typer.BadParameter(f"give --policy, one of: {', '.join(POLICY_NAMES)}", param_hint="'--policy'")
+    check_choice("policy", policy, POLICY_NAMES)
+    from wpbench.training.config import TrainConfig
+    from wpbench.training.loop import train as run_training
+
+    try:
+        config = TrainConfig(
+            policy=policy, data=data, out=out, weights_root=weights_root, minutes=minutes, max_steps=max_steps,
+            steps_per_epoch=steps_per_epoch, batch_size=batch_size, learning_rate=learning_rate,
+            num_action_points=num_action_points, num_anchor_points=num_anchor_points, augment_yaw=augment,
+            val_per_kind=val_per_kind, final_val_per_kind=final_val_per_kind, seed=seed, threads=threads,
+        )
+        metrics = run_training(config, echo=typer.echo, restart=restart)
+    except (ValueError, FileNotFoundError) as err:
+        typer.echo(f"Error: {err}", err=True)
+        raise typer.Exit(2)
+    for kind, values in metrics["val"].items():
+        typer.echo(f"  val {kind}: rotation {values['rot_deg']:.2f} deg, translation {values['trans_m'] * 100:.2f} cm, "
+                   f"point {values['point_m'] * 100:.2f} cm (n={values['n']})")
+    typer.echo(f"weights: {config.out}/model.pt ({metrics['train_wall_s'] / 60:.1f} min, "
+               f"peak RSS {metrics['peak_rss_mib']:.0f} MiB)")
+
+
+_single = typer.Typer(add_completion=False)
+_single.command(name="train")(train)
+# A click command (not a group), so the call is `wpbench train --policy gf`.
+app = typer.main.get_command(_single)

@@ -1,0 +1,42 @@
+"""Scene augmentation that keeps the ground truth consistent.
+
+A random yaw ``A`` (rotation about world z through the origin) applied to the
+whole scene moves every point ``p -> A p``; the cross-pose that takes the
+rotated action object to its rotated goal is ``T' = A T A^-1``, because
+``A p_goal = A T p = (A T A^-1) (A p)``. Gravity stays along z, so the
+augmented scene is one the simulator could have produced.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+
+def yaw_rotations(angles: torch.Tensor) -> torch.Tensor:
+    """(B,) radians -> (B, 4, 4) rotations about z."""
+    c, s = torch.cos(angles), torch.sin(angles)
+    A = torch.zeros(angles.shape[0], 4, 4, dtype=angles.dtype, device=angles.device)
+    A[:, 0, 0], A[:, 0, 1], A[:, 1, 0], A[:, 1, 1] = c, -s, s, c
+    A[:, 2, 2] = A[:, 3, 3] = 1.0
+    return A
+
+
+def random_yaw(batch: dict[str, torch.Tensor], generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:
+    """Rotate each sample of ``batch`` by its own random yaw in [-pi, pi).
+
+    batch: ``action`` (B, NA, 3), ``anchor`` (B, NB, 3), ``gt_transform`` (B, 4, 4);
+    other keys are passed through. Returns a new dict (inputs are not modified).
+    """
+    B = batch["action"].shape[0]
+    dtype = batch["action"].dtype
+    angles = (torch.rand(B, generator=generator, dtype=torch.float64) * 2 - 1) * math.pi
+    A = yaw_rotations(angles)
+    R = A[:, :3, :3].to(dtype)
+    out = dict(batch)
+    out["action"] = batch["action"] @ R.transpose(1, 2)
+    out["anchor"] = batch["anchor"] @ R.transpose(1, 2)
+    T = batch["gt_transform"].to(torch.float64)
+    out["gt_transform"] = (A @ T @ A.transpose(1, 2)).to(batch["gt_transform"].dtype)
+    return out

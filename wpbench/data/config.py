@@ -1,0 +1,91 @@
+"""What ``wpbench data generate`` samples, as one typed config.
+
+Kinds map to tasks: ``articulated`` samples come from ``wpbench/OpenDoor-v0``,
+``free-floating`` ones from ``wpbench/PlaceIn-v0``; each split (train / val)
+uses only that split's furniture instances, so validation furniture is never
+seen in training.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass, field
+
+ARTICULATED, FREE = "articulated", "free-floating"
+KINDS = (ARTICULATED, FREE)
+KIND_TASK = {ARTICULATED: "wpbench/OpenDoor-v0", FREE: "wpbench/PlaceIn-v0"}
+KIND_CODE = {ARTICULATED: 0, FREE: 1}
+SPLITS = ("train", "val")
+OBS_MODES = ("camera", "mesh")
+
+
+@dataclass(frozen=True)
+class GenerationConfig:
+    """How to sample one split.
+
+    samples_per_kind: samples of each kind (rounded up to whole shards).
+    shard_size: samples per shard file; a multiple of ``scene_reuse``.
+    scene_reuse: consecutive samples that share one loaded furniture instance
+        (a scene load is the slow part of a reset); the furniture's pose, the
+        start state and the camera still change with every sample.
+    wide_start_probability: for articulated samples, the chance that the start
+        joint value is redrawn uniformly in ``wide_start_fraction`` (fraction of the
+        way from closed to open) instead of the task's own lower quarter, so the
+        model also sees half-open doors. Validation keeps the task's distribution (0).
+    objects: Ravens objects placed by the free-floating task.
+    """
+
+    split: str = "train"
+    obs: str = "camera"
+    seed: int = 0
+    samples_per_kind: int = 1500
+    kinds: tuple[str, ...] = KINDS
+    shard_size: int = 50
+    scene_reuse: int = 5
+    wide_start_probability: float = 0.5
+    wide_start_fraction: tuple[float, float] = (0.0, 0.9)
+    objects: tuple[str, ...] = ("block",)
+    num_action_points: int = 256
+    num_anchor_points: int = 1024
+    assets: str = "procedural"
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.split not in SPLITS:
+            raise ValueError(f"split must be one of {SPLITS}, got {self.split!r}")
+        if self.obs not in OBS_MODES:
+            raise ValueError(f"obs must be one of {OBS_MODES}, got {self.obs!r}")
+        unknown = [k for k in self.kinds if k not in KINDS]
+        if unknown or not self.kinds:
+            raise ValueError(f"kinds must be a non-empty subset of {KINDS}, got {self.kinds!r}")
+        if self.samples_per_kind < 1 or self.shard_size < 1 or self.scene_reuse < 1:
+            raise ValueError("samples_per_kind, shard_size and scene_reuse must be >= 1")
+        if self.shard_size % self.scene_reuse:
+            raise ValueError(
+                f"shard_size ({self.shard_size}) must be a multiple of scene_reuse ({self.scene_reuse}) "
+                "so every shard starts with a fresh scene (shards are then independent and reproducible)"
+            )
+        if not 0.0 <= self.wide_start_probability <= 1.0:
+            raise ValueError(f"wide_start_probability must be in [0, 1], got {self.wide_start_probability}")
+
+    def shards_per_kind(self) -> int:
+        return -(-self.samples_per_kind // self.shard_size)
+
+    def sample_fingerprint(self) -> str:
+        """Hash of every field that changes what a given sample contains.
+
+        ``samples_per_kind`` and ``kinds`` only change how many shards exist, so
+        they are left out: asking for more samples later extends a split.
+        """
+        d = asdict(self)
+        for key in ("samples_per_kind", "kinds"):
+            d.pop(key)
+        return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["kinds"] = list(self.kinds)
+        d["wide_start_fraction"] = list(self.wide_start_fraction)
+        d["objects"] = list(self.objects)
+        return d

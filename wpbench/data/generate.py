@@ -1,0 +1,176 @@
+"""Sample (action cloud, anchor cloud, cross-pose) triples from the wpbench tasks.
+
+One env per kind (``OpenDoor-v0`` for articulated, ``PlaceIn-v0`` for
+free-floating), on the split's furniture only. Samples are numbered per kind;
+sample ``g`` uses an episode seed derived from (config seed, split, kind, g),
+and every ``scene_reuse``-th sample reloads the scene (``reconfigure``) so
+that a shard never depends on what was generated before it: shards are
+reproducible and a run can be resumed by skipping the shards already on disk.
+
+Why reuse scenes: a reset that loads a furniture URDF (and, with cameras, its
+render bodies) is the slow part; a reset without reconfiguration only moves the
+furniture, sets a new start state and a new camera viewpoint.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from wpbench.data.config import ARTICULATED, FREE, KIND_CODE, KIND_TASK, SPLITS, GenerationConfig
+from wpbench.data.manifest import build_manifest, split_dir, write_manifest
+from wpbench.data.shards import shard_path, stack_samples, write_shard
+
+
+@dataclass
+class GenerationReport:
+    """What one ``generate`` call did."""
+
+    directory: Path
+    written_shards: int
+    skipped_shards: int
+    new_samples: int
+    seconds: float
+    manifest: dict
+
+    @property
+    def samples_per_second(self) -> float:
+        return self.new_samples / self.seconds if self.seconds > 0 else float("nan")
+
+
+def sample_seed(config: GenerationConfig, kind: str, index: int) -> int:
+    """Episode seed of sample ``index`` of ``kind``: distinct across seeds, splits and kinds."""
+    entropy = [int(config.seed), SPLITS.index(config.split), KIND_CODE[kind], int(index)]
+    return int(np.random.SeedSequence(entropy).generate_state(1, dtype=np.uint32)[0] & 0x7FFFFFFF)
+
+
+def make_env(config: GenerationConfig, kind: str):
+    """The task env for ``kind``; scenes are reloaded only when we ask (reconfiguration_freq=0)."""
+    import gymnasium as gym
+
+    import tasks  # noqa: F401  (registers the wpbench envs)
+
+    kwargs = dict(
+        obs_mode=config.obs, assets=config.assets, split=config.split,
+        num_action_points=config.num_action_points, num_anchor_points=config.num_anchor_points,
+        reconfiguration_freq=0,
+    )
+    if kind == FREE:
+        kwargs["objects"] = tuple(config.objects)
+    return gym.make(KIND_TASK[kind], **kwargs)
+
+
+def symmetric_min_rotation(T: np.ndarray, object_pose: np.ndarray, discrete: np.ndarray) -> np.ndarray:
+    """Among the cross-poses that are equivalent for a symmetric object, the one that rotates least.
+
+    An object at pose ``O`` looks the same at ``O S`` for a symmetry ``S`` (object frame),
+    so ``T O S O^-1`` reaches an equally good goal. Picking the smallest rotation makes the
+    target a function of what the model sees (it cannot tell the symmetric poses apart).
+
+    T, object_pose (4, 4); discrete (K, 3, 3) -> (4, 4).
+    """
+    best, best_angle = T, np.inf
+    inv = np.linalg.inv(object_pose)
+    for S in discrete:
+        S4 = np.eye(4)
+        S4[:3, :3] = S
+        candidate = T @ object_pose @ S4 @ inv
+        angle = np.arccos(np.clip((np.trace(candidate[:3, :3]) - 1) / 2, -1.0, 1.0))
+        if angle < best_angle - 1e-9:
+            best, best_angle = candidate, angle
+    return best
+
+
+def draw_sample(env, config: GenerationConfig, kind: str, index: int) -> dict:
+    """Reset ``env`` for sample ``index`` and read one sample dict (keys of ``shards.ARRAY_KEYS``)."""
+    from wpbench.sim.poses import pose_to_matrix
+
+    seed = sample_seed(config, kind, index)
+    base = env.unwrapped
+    reconfigure = index % config.scene_reuse == 0
+    if reconfigure:
+        # The task draws the furniture from an rng counter that otherwise carries over
+        # from earlier episodes; restarting it makes the scene a function of the seed only.
+        base._rng_counter = -1
+    obs, _ = env.reset(seed=seed, options={"reconfigure": reconfigure})
+    start_fraction = float("nan")
+    if kind == ARTICULATED:
+        rng = np.random.default_rng([seed, 17])
+        if rng.random() < config.wide_start_probability:
+            fraction = float(rng.uniform(*config.wide_start_fraction))
+            base.furniture.set_target_qpos(base.joint_fraction(fraction))
+            base._stage_state = base._make_stage_state()
+            base._obs_cache = None
+            obs = base.get_obs()
+        a = base.asset
+        start_fraction = (base.furniture.qpos - a.closed_qpos) / (a.open_qpos - a.closed_qpos)
+    T_raw = np.asarray(base._stage_state.gt_cross_pose, dtype=np.float64)
+    T = T_raw
+    free_object = ""
+    if kind == FREE:
+        free_object = base.free_spec.name
+        symmetry = getattr(base.free_spec, "symmetry", None)
+        if symmetry is not None and getattr(symmetry, "discrete", None) is not None:
+            discrete = np.asarray(symmetry.discrete, dtype=np.float64).reshape(-1, 3, 3)
+            T = symmetric_min_rotation(T_raw, pose_to_matrix(base.free_body.entity_pose), discrete)
+    return {
+        "action_points": obs["action_points"][0].cpu().numpy(),
+        "anchor_points": obs["anchor_points"][0].cpu().numpy(),
+        "gt_transform": T,
+        "gt_transform_raw": T_raw,
+        "kind": KIND_CODE[kind],
+        "category": base.asset.category,
+        "object_id": base.asset.object_id,
+        "free_object": free_object,
+        "seed": seed,
+        "start_fraction": start_fraction,
+        "camera_fallback": bool(getattr(base, "_observation_fallback", False)),
+    }
+
+
+def generate(
+    root: Path,
+    config: GenerationConfig,
+    progress: bool = True,
+    on_sample: Callable[[str, int], None] | None = None,
+) -> GenerationReport:
+    """Write the shards of ``config`` under ``root/<split>/`` that do not exist yet, then the manifest."""
+    from tqdm import tqdm
+
+    directory = split_dir(root, config.split)
+    todo = [(kind, i) for kind in config.kinds for i in range(config.shards_per_kind())
+            if not shard_path(directory, kind, i).is_file()]
+    total_shards = len(config.kinds) * config.shards_per_kind()
+    skipped = total_shards - len(todo)
+    new_samples, started = 0, time.perf_counter()
+    bar = tqdm(total=len(todo) * config.shard_size, disable=not progress, unit="sample", dynamic_ncols=True,
+               desc=f"{config.split} ({skipped} shards already done)")
+    envs: dict[str, object] = {}
+    try:
+        for kind, shard in todo:
+            if kind not in envs:
+                envs[kind] = make_env(config, kind)
+            samples = []
+            for i in range(shard * config.shard_size, (shard + 1) * config.shard_size):
+                samples.append(draw_sample(envs[kind], config, kind, i))
+                bar.update(1)
+                if on_sample is not None:
+                    on_sample(kind, i)
+            write_shard(shard_path(directory, kind, shard), stack_samples(samples, config.sample_fingerprint()))
+            new_samples += len(samples)
+            elapsed = time.perf_counter() - started
+            bar.set_postfix(samples_per_s=f"{new_samples / max(elapsed, 1e-9):.2f}")
+    finally:
+        bar.close()
+        for env in envs.values():
+            env.close()
+    seconds = time.perf_counter() - started
+    generation = {"last_run_new_samples": new_samples, "last_run_seconds": round(seconds, 2),
+                  "last_run_samples_per_second": round(new_samples / seconds, 3) if new_samples else None}
+    manifest = build_manifest(directory, config, generation)
+    write_manifest(directory, manifest)
+    return GenerationReport(directory, len(todo), skipped, new_samples, seconds, manifest)

@@ -1,0 +1,11 @@
+"""Training of the learned policies (``wpbench train --policy NAME``).
+
+- ``specs``: which model, loss preset, data kinds and starting weights each policy uses.
+- ``config``: :class:`TrainConfig` (budget, batch, learning rate, point counts).
+- ``batches``: shuffling, point subsampling and augmentation of training batches.
+- ``evaluate``: validation errors (rotation deg, translation m, point error m) per kind.
+- ``checkpoint``: save / resume the full training state; final weights + config + metrics.
+- ``log``: ``train_log.csv``, ``progress.json`` and the ``train_log.png`` plot.
+- ``loop``: the trainer that ties them together.
+- ``best``: choose the best WeightedPose variant (``policies/weights/best.json``).
+"""

@@ -1,0 +1,65 @@
+"""How one training run goes, as a typed config (saved in ``config.json``)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+
+@dataclass
+class TrainConfig:
+    """A training run of ``policy`` on ``data`` for at most ``minutes`` of wall time.
+
+    minutes: budget for the training epochs, summed over resumed runs (the final
+        validation runs after it).
+    max_steps: optional cap on optimiser steps (tests use 2).
+    steps_per_epoch: optimiser steps between validations / checkpoints (an "epoch"
+        here is this many steps, so a run that cannot see all data still logs
+        and checkpoints regularly).
+    num_action_points / num_anchor_points: points per cloud the model trains on,
+        a random subset of the stored clouds (cheaper; the policy subsamples its
+        observations to the same counts).
+    val_per_kind: validation samples per kind checked after every epoch;
+        final_val_per_kind: for the final metrics.
+    learning_rate: None = the policy's default (``specs``).
+    model_overrides: changes to the model's default config (baselines only;
+        WeightedPose takes its branch configs from the trained baselines).
+    """
+
+    policy: str
+    data: Path = Path("data")
+    out: Path | None = None
+    weights_root: Path = Path("policies/weights")
+    minutes: float = 20.0
+    max_steps: int | None = None
+    steps_per_epoch: int = 40
+    batch_size: int = 8
+    learning_rate: float | None = None
+    grad_clip: float = 1.0
+    num_action_points: int = 128
+    num_anchor_points: int = 512
+    augment_yaw: bool = True
+    val_per_kind: int = 32
+    final_val_per_kind: int = 200
+    seed: int = 0
+    threads: int = 1
+    model_overrides: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.data = Path(self.data)
+        self.weights_root = Path(self.weights_root)
+        self.out = Path(self.out) if self.out is not None else self.weights_root / self.policy
+        if self.minutes <= 0:
+            raise ValueError(f"minutes must be > 0, got {self.minutes}")
+        for name in ("steps_per_epoch", "batch_size", "num_action_points", "num_anchor_points",
+                     "val_per_kind", "final_val_per_kind", "threads"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.max_steps is not None and self.max_steps < 1:
+            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        for key in ("data", "out", "weights_root"):
+            d[key] = str(d[key])
+        return d

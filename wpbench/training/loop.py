@@ -1,0 +1,218 @@
+"""The trainer: ``train(TrainConfig) -> metrics``.
+
+Read top to bottom: load data -> build (or warm-start) the model -> resume from
+``checkpoint.pt`` if there is one -> epochs of ``steps_per_epoch`` optimiser
+steps, each followed by validation, a log row, a checkpoint and the plot ->
+stop at the time budget (or ``max_steps``) -> final validation -> ``model.pt``,
+``config.json``, ``metrics.json``.
+"""
+
+from __future__ import annotations
+
+import math
+import resource
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import torch
+
+from wpbench.data.config import KINDS
+from wpbench.data.dataset import CrossPoseDataset
+from wpbench.models.loss_presets import compute_loss
+from wpbench.training import log as train_log
+from wpbench.training.artifacts import config_to_json, load_trained_model, save_final
+from wpbench.training.batches import make_batch, prepare, shuffled_batches
+from wpbench.training.best import select_best
+from wpbench.training.checkpoint import load_checkpoint, save_checkpoint
+from wpbench.training.config import TrainConfig
+from wpbench.training.evaluate import evaluate, mean_point_error
+from wpbench.training.specs import PolicySpec, get_spec
+
+
+def peak_rss_mib() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def build_policy_model(spec: PolicySpec, config: TrainConfig) -> tuple[torch.nn.Module, dict]:
+    """The model to train and a description of where it started.
+
+    WeightedPose variants start from the trained Goal Flow and TAX-Pose weights
+    (their configs fix the branch sizes and the point counts).
+    """
+    from wpbench.models.registry import build_model
+
+    if not spec.starts_from:
+        return build_model(spec.model, **config.model_overrides), {"from": "scratch"}
+    from wpbench.models.configs import WeightedPoseConfig
+    from wpbench.models.weightedpose import WeightedPose
+
+    loaded = {}
+    for name in spec.starts_from:
+        try:
+            loaded[name] = load_trained_model(config.weights_root / name, name)
+        except FileNotFoundError as err:
+            commands = " && ".join(f"wpbench train --policy {n}" for n in spec.starts_from)
+            raise FileNotFoundError(
+                f"{spec.name} starts from the trained {' and '.join(spec.starts_from)} weights: {err}. "
+                f"Train them first: `{commands}`"
+            ) from err
+    (gf_model, gf_cfg), (tp_model, tp_cfg) = loaded["gf"], loaded["tp"]
+    wp_config = WeightedPoseConfig(goalflow=gf_model.config, taxpose=tp_model.config,
+                                   w_mode=gf_model.config.mixing_weight)
+    model = WeightedPose.from_pretrained(gf_model.state_dict(), tp_model.state_dict(), wp_config)
+    for name, (_, cfg) in loaded.items():
+        counts = (cfg["num_action_points"], cfg["num_anchor_points"])
+        if counts != (config.num_action_points, config.num_anchor_points):
+            raise ValueError(
+                f"{name} was trained on {counts[0]} action / {counts[1]} anchor points but this run uses "
+                f"{config.num_action_points} / {config.num_anchor_points}; use the same point counts"
+            )
+    origin = {"from": {name: {"model_hash": cfg.get("model_hash", ""), "data": cfg.get("data", {})}
+                       for name, (_, cfg) in loaded.items()}}
+    return model, origin
+
+
+def _load_data(config: TrainConfig, spec: PolicySpec) -> tuple[CrossPoseDataset, CrossPoseDataset]:
+    train_set = CrossPoseDataset(config.data / "train", spec.kinds)
+    val_set = CrossPoseDataset(config.data / "val", spec.kinds)
+    return train_set, val_set
+
+
+def _val_row(results: dict[str, dict[str, float]]) -> dict[str, float]:
+    row: dict[str, float] = {}
+    for kind, values in results.items():
+        short = "art" if kind == KINDS[0] else "free"
+        for key in ("rot_deg", "trans_m", "point_m"):
+            row[f"val_{short}_{key}"] = values[key]
+        if "w" in values:
+            row[f"val_{short}_w"] = values["w"]
+    row["val_mean_point_m"] = mean_point_error(results)
+    return row
+
+
+def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: bool = False) -> dict:
+    """Train ``config.policy``; resumes from ``config.out/checkpoint.pt`` unless ``restart``."""
+    spec = get_spec(config.policy)
+    torch.set_num_threads(config.threads)
+    torch.manual_seed(config.seed)
+    out = Path(config.out)
+    out.mkdir(parents=True, exist_ok=True)
+    train_set, val_set = _load_data(config, spec)
+    data_hashes = {"train": train_set.manifest["content_hash"], "val": val_set.manifest["content_hash"]}
+    model, origin = build_policy_model(spec, config)
+    lr = config.learning_rate if config.learning_rate is not None else spec.learning_rate
+    optimizer = torch.optim.Adam(model.parameters(), lr=lr)
+    generator = torch.Generator().manual_seed(config.seed)
+
+    epoch, step, elapsed, rows = 0, 0, 0.0, []
+    state = None if restart else load_checkpoint(out)
+    if state is not None:
+        if state["policy"] != config.policy or state["data"] != data_hashes:
+            raise ValueError(
+                f"{out}/checkpoint.pt belongs to policy {state['policy']!r} on data {state['data']}, not "
+                f"{config.policy!r} on {data_hashes}; pass --restart to start over or choose another --out"
+            )
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        generator.set_state(state["generator"])
+        epoch, step, elapsed, rows = state["epoch"], state["step"], state["elapsed_s"], state["rows"]
+        echo(f"resuming {config.policy} from epoch {epoch}, step {step}, {elapsed / 60:.1f} min trained")
+    budget = config.minutes * 60.0
+    batches = shuffled_batches(len(train_set), config.batch_size, generator)
+    echo(f"{config.policy}: {len(train_set)} train / {len(val_set)} val samples ({', '.join(spec.kinds)}), "
+         f"{sum(p.numel() for p in model.parameters())} parameters, lr {lr}, budget {config.minutes} min")
+
+    def finished() -> bool:
+        return (config.max_steps is not None and step >= config.max_steps) or elapsed >= budget
+
+    last_epoch_seconds = 0.0
+    model.train()
+    while not finished():
+        # Do not start an epoch that would overrun the budget by more than half an epoch.
+        if rows and elapsed + 0.5 * last_epoch_seconds > budget:
+            break
+        started = time.perf_counter()
+        sums: dict[str, float] = {}
+        steps_done = skipped = 0
+        while steps_done < config.steps_per_epoch and not (config.max_steps is not None and step >= config.max_steps):
+            batch = prepare(make_batch(train_set, next(batches)), config.num_action_points,
+                            config.num_anchor_points, config.augment_yaw, generator)
+            output = model(batch["action"], batch["anchor"])
+            loss, terms = compute_loss(output, batch, spec.loss_preset)
+            optimizer.zero_grad(set_to_none=True)
+            if not torch.isfinite(loss):
+                skipped += 1  # a degenerate SVD in one batch must not poison the weights
+            else:
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
+                optimizer.step()
+                sums["train_loss"] = sums.get("train_loss", 0.0) + float(loss)
+                for name, value in terms.items():
+                    sums[f"loss_{name}"] = sums.get(f"loss_{name}", 0.0) + float(value)
+            steps_done += 1
+            step += 1
+            if elapsed + time.perf_counter() - started >= budget:
+                break
+        results = evaluate(model, val_set, spec.kinds, config.val_per_kind, config.num_action_points,
+                           config.num_anchor_points, seed=config.seed)
+        last_epoch_seconds = time.perf_counter() - started
+        elapsed += last_epoch_seconds
+        epoch += 1
+        good = max(steps_done - skipped, 1)
+        row = {"epoch": epoch, "step": step, "elapsed_s": round(elapsed, 1), "skipped_steps": skipped,
+               **{k: v / good for k, v in sums.items()}, **_val_row(results)}
+        rows.append(row)
+        save_checkpoint(out, {"policy": config.policy, "data": data_hashes, "model": model.state_dict(),
+                              "optimizer": optimizer.state_dict(), "generator": generator.get_state(),
+                              "epoch": epoch, "step": step, "elapsed_s": elapsed, "rows": rows,
+                              "train_config": config.to_json()})
+        train_log.write_log(out, rows)
+        train_log.plot_log(out, rows, f"{config.policy} ({spec.loss_preset} loss)")
+        train_log.write_progress(out, {"policy": config.policy, "status": "training", "epoch": epoch, "step": step,
+                                       "elapsed_min": round(elapsed / 60, 2), "budget_min": config.minutes,
+                                       "last_row": row})
+        echo(f"epoch {epoch} step {step} {elapsed / 60:.1f} min loss {row.get('train_loss', math.nan):.4g} "
+             f"val point {row['val_mean_point_m'] * 100:.2f} cm "
+             + " ".join(f"{k} {v['rot_deg']:.1f}deg/{v['trans_m'] * 100:.1f}cm" for k, v in results.items()))
+
+    final_started = time.perf_counter()
+    final = evaluate(model, val_set, spec.kinds, config.final_val_per_kind, config.num_action_points,
+                     config.num_anchor_points, seed=config.seed + 1)
+    metrics = {
+        "policy": config.policy,
+        "val": final,
+        "val_mean_point_m": mean_point_error(final),
+        "train_wall_s": round(elapsed, 1),
+        "final_eval_s": round(time.perf_counter() - final_started, 1),
+        "steps": step,
+        "epochs": epoch,
+        "samples_seen": step * config.batch_size,
+        "peak_rss_mib": round(peak_rss_mib(), 1),
+    }
+    import hashlib
+
+    model_hash = hashlib.sha256(b"".join(v.detach().float().numpy().tobytes() for v in model.state_dict().values()
+                                         if v.is_floating_point())).hexdigest()[:16]
+    description = {
+        "policy": config.policy,
+        "model": spec.model,
+        "model_config": config_to_json(model.config),
+        "loss_preset": spec.loss_preset,
+        "kinds": list(spec.kinds),
+        "num_action_points": config.num_action_points,
+        "num_anchor_points": config.num_anchor_points,
+        "data": {"path": str(config.data), **{f"{k}_manifest_hash": v for k, v in data_hashes.items()}},
+        "model_hash": model_hash,
+        "init": origin,
+        "train_config": config.to_json(),
+    }
+    save_final(out, model, description, metrics)
+    train_log.write_progress(out, {"policy": config.policy, "status": "done", "epoch": epoch, "step": step,
+                                   "elapsed_min": round(elapsed / 60, 2), "budget_min": config.minutes,
+                                   "metrics": metrics})
+    if spec.model == "weightedpose":
+        best = select_best(config.weights_root)
+        if best is not None:
+            echo(f"best WeightedPose variant so far: {best['policy']} ({config.weights_root}/best.json)")
+    return metrics

@@ -1,0 +1,41 @@
+"""What each trainable policy is: model, loss preset, the data it sees, where it starts.
+
+The baselines are trained on one kind each (Goal Flow on articulated data,
+TAX-Pose on free-floating data, as in the paper's table); the WeightedPose
+variants on both kinds, starting from the trained baselines' weights.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from wpbench.data.config import ARTICULATED, FREE
+
+
+@dataclass(frozen=True)
+class PolicySpec:
+    name: str
+    model: str                       # wpbench.models.registry name
+    loss_preset: str                 # wpbench.models.loss_presets name
+    kinds: tuple[str, ...]           # data kinds it trains and validates on
+    starts_from: tuple[str, ...] = ()  # policies whose trained weights initialise it
+    learning_rate: float = 1e-3
+
+
+POLICY_SPECS: dict[str, PolicySpec] = {
+    spec.name: spec
+    for spec in (
+        PolicySpec("gf", "goalflow", "gf", (ARTICULATED,)),
+        PolicySpec("tp", "taxpose", "tp", (FREE,)),
+        PolicySpec("wp-og", "weightedpose", "wp-og", (ARTICULATED, FREE), ("gf", "tp"), 3e-4),
+        PolicySpec("wp-postsvd", "weightedpose", "wp-postsvd", (ARTICULATED, FREE), ("gf", "tp"), 3e-4),
+        PolicySpec("wp-postsvd-t", "weightedpose", "wp-postsvd-t", (ARTICULATED, FREE), ("gf", "tp"), 3e-4),
+    )
+}
+WEIGHTED_POSE_VARIANTS = tuple(name for name, spec in POLICY_SPECS.items() if spec.model == "weightedpose")
+
+
+def get_spec(name: str) -> PolicySpec:
+    if name not in POLICY_SPECS:
+        raise ValueError(f"unknown trainable policy {name!r}; choose one of {', '.join(POLICY_SPECS)}")
+    return POLICY_SPECS[name]
