@@ -30,7 +30,7 @@ setup:
 	@bash scripts/setup.sh
 
 run: setup
-	$(WPBENCH) run --policy $(POLICY) --task $(TASK) --split $(SPLIT) --episodes $(EPISODES) $(RUN_ARGS)
+	$(WPBENCH) run --policy $(POLICY) --task $(TASK) --split $(SPLIT) --episodes $(EPISODES) --resume $(RUN_ARGS)
 	$(WPBENCH) leaderboard --results $(RESULTS) --quiet
 
 # pytest exits with 5 when it collected no tests: that is a failure here too.

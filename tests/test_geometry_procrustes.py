@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import roma
@@ -9,6 +11,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from wpbench.bench.svd import run
 from wpbench.geometry import se3
 from wpbench.geometry.procrustes import dual_flow_svd, weighted_pose_svd, weighted_procrustes
 
@@ -335,3 +338,14 @@ def test_bad_pose_shapes_raise() -> None:
         weighted_pose_svd(p, v, a, u, q, b, d[:, :3], torch.zeros(2, dtype=torch.float64))
     with pytest.raises(ValueError, match=r"w must be a tensor of shape \(B,\)"):
         weighted_pose_svd(p, v, a, u, q, b, d, torch.zeros(2, 4, dtype=torch.float64))
+
+
+def test_svd_benchmark_runs_and_agrees_with_roma(tmp_path, capsys) -> None:
+    out = tmp_path / "svd.json"
+    results = run(batch=4, points=50, repeats=2, json_path=out)
+    written = json.loads(out.read_text())
+    for key in ("batch", "points", "wpbench_ms", "roma_ms", "max_abs_diff", "dtype", "torch_threads"):
+        assert key in written
+    assert written["batch"] == 4 and written["points"] == 50
+    assert results["max_abs_diff"] < 1e-9 and results["wpbench_ms"] > 0
+    assert "roma.rigid_points_registration" in capsys.readouterr().out

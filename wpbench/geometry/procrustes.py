@@ -283,7 +283,8 @@ def weighted_pose_svd(
     - per-point ``w`` (B, NA) (variant): action pair i gets ``(1 - w_i) a_hat_i``,
       flow pair i gets ``w_i / N_A``, and the anchor block, which has no action
       point of its own, gets ``(1 - mean_i w_i) b_hat_j``. With all ``w_i``
-      equal this is exactly the per-sample case.
+      equal this is exactly the per-sample case. These weights need not sum
+      to 1 (``weighted_procrustes`` only uses their ratios).
 
     ``w = 0`` is ``dual_flow_svd``; ``w = 1`` is Kabsch on ``(p, p + d)`` with
     uniform weights (then ``a`` and ``b`` may be all zero).

@@ -1,0 +1,95 @@
+"""The trainer on a tiny synthetic split with tiny models: logs, checkpoints, final
+files, resume after an interruption, warm starts of WeightedPose, best.json."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import pytest
+import torch
+
+from wpbench.data.synthetic import write_synthetic_split
+from wpbench.training.config import TrainConfig
+from wpbench.training.loop import train
+
+TINY_GF = {"encoder": {"k": 4, "edge_channels": [8, 8], "emb_dim": 16, "groups": 4}, "head_hidden": 16}
+TINY_TP = {**TINY_GF, "attention_heads": 2}
+
+
+def _config(root, policy, **kw) -> TrainConfig:
+    overrides = {"gf": TINY_GF, "tp": TINY_TP}.get(policy, {})
+    base = dict(policy=policy, data=root / "data", weights_root=root / "weights", max_steps=2, steps_per_epoch=1,
+                batch_size=2, num_action_points=24, num_anchor_points=40, val_per_kind=2, final_val_per_kind=3,
+                model_overrides=overrides)
+    base.update(kw)
+    return TrainConfig(**base)
+
+
+@pytest.fixture(scope="module")
+def data_root(tmp_path_factory):
+    root = tmp_path_factory.mktemp("train")
+    write_synthetic_split(root / "data", "train", per_kind=4, num_action_points=32, num_anchor_points=48)
+    write_synthetic_split(root / "data", "val", per_kind=3, num_action_points=32, num_anchor_points=48, seed=1)
+    return root
+
+
+def _rows(out):
+    with open(out / "train_log.csv") as handle:
+        return list(csv.DictReader(handle))
+
+
+def test_two_iterations_write_log_checkpoint_and_model(data_root):
+    config = _config(data_root, "gf")
+    metrics = train(config, echo=lambda _: None)
+    out = config.out
+    for name in ("train_log.csv", "train_log.png", "checkpoint.pt", "model.pt", "config.json", "metrics.json",
+                 "progress.json"):
+        assert (out / name).is_file(), name
+    rows = _rows(out)
+    assert [int(r["step"]) for r in rows] == [1, 2]
+    assert all(float(r["train_loss"]) > 0 and "val_art_rot_deg" in r for r in rows)
+    assert metrics["steps"] == 2 and set(metrics["val"]) == {"articulated"}
+    assert metrics["val"]["articulated"]["n"] == 3 and metrics["peak_rss_mib"] > 0
+    described = json.loads((out / "config.json").read_text())
+    assert described["model"] == "goalflow" and described["loss_preset"] == "gf"
+    assert described["model_config"]["encoder"]["emb_dim"] == 16
+    assert described["data"]["train_manifest_hash"]
+    state = torch.load(out / "model.pt", weights_only=True)
+    assert all(v.dtype in (torch.float32, torch.int64) for v in state.values())
+    assert (out / "model.pt").stat().st_size < 20e6
+
+
+def test_an_interrupted_run_resumes_from_its_checkpoint(data_root):
+    config = _config(data_root, "tp", max_steps=1)
+    train(config, echo=lambda _: None)
+    first = _rows(config.out)
+    assert len(first) == 1
+    state = torch.load(config.out / "checkpoint.pt", weights_only=False)
+    assert state["step"] == 1 and state["epoch"] == 1
+
+    messages = []
+    train(_config(data_root, "tp", max_steps=2), echo=messages.append)
+    assert any("resuming tp from epoch 1, step 1" in m for m in messages)
+    rows = _rows(config.out)
+    assert [int(r["step"]) for r in rows] == [1, 2]
+    assert rows[0] == first[0]  # the first epoch is kept, not redone
+
+
+def test_weighted_pose_needs_trained_branches_and_says_how_to_make_them(tmp_path, data_root):
+    config = _config(data_root, "wp-postsvd", weights_root=tmp_path / "empty")
+    with pytest.raises(FileNotFoundError, match="wpbench train --policy gf"):
+        train(config, echo=lambda _: None)
+
+
+def test_weighted_pose_starts_from_gf_and_tp_and_writes_best_json(data_root):
+    for policy in ("gf", "tp"):
+        if not (data_root / "weights" / policy / "model.pt").is_file():
+            train(_config(data_root, policy), echo=lambda _: None)
+    config = _config(data_root, "wp-postsvd-t", max_steps=1)
+    metrics = train(config, echo=lambda _: None)
+    assert set(metrics["val"]) == {"articulated", "free-floating"}
+    described = json.loads((config.out / "config.json").read_text())
+    assert set(described["init"]["from"]) == {"gf", "tp"}
+    best = json.loads((data_root / "weights" / "best.json").read_text())
+    assert best["policy"] == "wp-postsvd-t" and "wp-postsvd-t" in best["candidates"]
