@@ -8,7 +8,6 @@ contacts with the body.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest

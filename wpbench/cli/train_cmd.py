@@ -16,7 +16,7 @@ def train(
     data: Path = typer.Option(Path("data"), help="Data root with train/ and val/ (from `wpbench data generate`)."),
     minutes: float = typer.Option(20.0, min=0.01, help="Training wall-time budget in minutes (summed over resumes)."),
     out: Path = typer.Option(None, help="Output folder [default: WEIGHTS_ROOT/<policy>]."),
-    weights_root: Path = typer.Option(Path("policies/weights"), help="Where trained policies live (warm starts, best.json)."),
+    weights_root: Path = typer.Option(None, help="Where trained policies live, warm starts and best.json [default: policies/weights]."),
     batch_size: int = typer.Option(8, min=1, help="Samples per optimiser step."),
     steps_per_epoch: int = typer.Option(40, min=1, help="Optimiser steps between validation + checkpoint."),
     max_steps: int = typer.Option(None, min=1, help="Stop after this many optimiser steps (whatever the budget)."),
@@ -36,7 +36,9 @@ def train(
     train_log.csv and train_log.png into OUT."""
     if select_best:
         from wpbench.training.best import select_best as choose
+        from wpbench.training.config import default_weights_root
 
+        weights_root = weights_root or default_weights_root()
         best = choose(weights_root)
         if best is None:
             typer.echo(f"Error: no trained WeightedPose variant under {weights_root}; "

@@ -163,6 +163,8 @@ def generate(
             write_shard(shard_path(directory, kind, shard), stack_samples(samples, config.sample_fingerprint()))
             new_samples += len(samples)
             elapsed = time.perf_counter() - started
+            # Keep the manifest current so training can start on the shards written so far.
+            write_manifest(directory, build_manifest(directory, config, {"in_progress": True}))
             bar.set_postfix(samples_per_s=f"{new_samples / max(elapsed, 1e-9):.2f}")
     finally:
         bar.close()

@@ -84,7 +84,8 @@ def load_state(weights_dir: Path, policy: str | None = None) -> dict[str, torch.
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as err:  # noqa: BLE001 - any unpickling failure means a corrupt file
-        raise ValueError(f"{path} is corrupt or not a model file ({err}); retrain with {_train_command(policy)}") from err
+        reason = (str(err).strip().splitlines() or [type(err).__name__])[-1][:200]
+        raise ValueError(f"{path} is corrupt or not a model file ({reason}); retrain with {_train_command(policy)}") from err
     if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
         raise ValueError(f"{path} does not hold a state_dict; retrain with {_train_command(policy)}")
     return state

@@ -6,6 +6,13 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 
+def default_weights_root() -> Path:
+    """``policies/weights`` of the installed ``policies`` package (where the learned policies look)."""
+    import policies
+
+    return Path(policies.__file__).resolve().parent / "weights"
+
+
 @dataclass
 class TrainConfig:
     """A training run of ``policy`` on ``data`` for at most ``minutes`` of wall time.
@@ -29,7 +36,7 @@ class TrainConfig:
     policy: str
     data: Path = Path("data")
     out: Path | None = None
-    weights_root: Path = Path("policies/weights")
+    weights_root: Path | None = None
     minutes: float = 20.0
     max_steps: int | None = None
     steps_per_epoch: int = 40
@@ -47,7 +54,7 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         self.data = Path(self.data)
-        self.weights_root = Path(self.weights_root)
+        self.weights_root = Path(self.weights_root) if self.weights_root is not None else default_weights_root()
         self.out = Path(self.out) if self.out is not None else self.weights_root / self.policy
         if self.minutes <= 0:
             raise ValueError(f"minutes must be > 0, got {self.minutes}")

@@ -29,8 +29,8 @@ def evaluate(
     batch_size: int = 16,
     seed: int = 0,
 ) -> dict[str, dict[str, float]]:
-    """{kind: {"rot_deg", "trans_m", "point_m", "failures", "n"[, "w"]}} on the first ``per_kind``
-    samples of each kind (fixed subsampling seed, so epochs are comparable).
+    """{kind: {"rot_deg", "trans_m", "point_m", "failures", "n"[, "w"]}} on ``per_kind`` samples of each kind
+    spread evenly over the split (fixed subsampling seed, so epochs are comparable).
 
     Means are over finite predictions; ``failures`` counts samples whose prediction was NaN.
     """
@@ -40,7 +40,9 @@ def evaluate(
     results: dict[str, dict[str, float]] = {}
     try:
         for kind in kinds:
-            idx = torch.nonzero(dataset.kind == KIND_CODE[kind]).flatten()[:per_kind]
+            idx = torch.nonzero(dataset.kind == KIND_CODE[kind]).flatten()
+            if len(idx) > per_kind:  # spread over the whole split (consecutive samples share furniture)
+                idx = idx[torch.linspace(0, len(idx) - 1, per_kind).round().long()]
             rot, trans, point, w = [], [], [], []
             for start in range(0, len(idx), batch_size):
                 batch = make_batch(dataset, idx[start:start + batch_size])

@@ -147,7 +147,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
                 loss.backward()
                 torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
                 optimizer.step()
-                sums["train_loss"] = sums.get("train_loss", 0.0) + float(loss)
+                sums["train_loss"] = sums.get("train_loss", 0.0) + float(loss.detach())
                 for name, value in terms.items():
                     sums[f"loss_{name}"] = sums.get(f"loss_{name}", 0.0) + float(value)
             steps_done += 1

@@ -1,0 +1,102 @@
+"""Learned policies load trained weights, answer with a rigid cross-pose and fail
+clearly (naming the command to run) when weights are missing or corrupt."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from policies.learned import LearnedPolicy
+from policies.registry import make_policy
+from wpbench.data.synthetic import write_synthetic_split
+from wpbench.training.config import TrainConfig
+from wpbench.training.loop import train
+
+TINY_GF = {"encoder": {"k": 4, "edge_channels": [8, 8], "emb_dim": 16, "groups": 4}, "head_hidden": 16}
+TINY_TP = {**TINY_GF, "attention_heads": 2}
+
+
+@pytest.fixture(scope="module")
+def weights_root(tmp_path_factory):
+    root = tmp_path_factory.mktemp("learned")
+    write_synthetic_split(root / "data", "train", per_kind=3, num_action_points=32, num_anchor_points=48)
+    write_synthetic_split(root / "data", "val", per_kind=2, num_action_points=32, num_anchor_points=48, seed=1)
+    for policy, overrides in (("gf", TINY_GF), ("tp", TINY_TP), ("wp-postsvd", {})):
+        train(TrainConfig(policy=policy, data=root / "data", weights_root=root / "weights", max_steps=1,
+                          batch_size=2, num_action_points=24, num_anchor_points=40, val_per_kind=1,
+                          final_val_per_kind=2, model_overrides=overrides), echo=lambda _: None)
+    return root / "weights"
+
+
+def _obs(seed=0, na=256, nb=1024, kind=0):
+    rng = np.random.default_rng(seed)
+    return {"action_points": rng.uniform(-0.1, 0.1, (na, 3)).astype(np.float32) + 0.5,
+            "anchor_points": rng.uniform(-0.4, 0.4, (nb, 3)).astype(np.float32), "kind": kind, "stage": 0}
+
+
+def _assert_rigid(T):
+    assert T.shape == (4, 4) and T.dtype == np.float64 and np.all(np.isfinite(T))
+    np.testing.assert_allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-5)
+    assert np.linalg.det(T[:3, :3]) == pytest.approx(1.0, abs=1e-5)
+    np.testing.assert_allclose(T[3], [0, 0, 0, 1])
+
+
+@pytest.mark.parametrize("name", ["gf", "tp", "wp-postsvd"])
+def test_learned_policy_gives_a_rigid_transform_and_full_size_diagnostics(weights_root, name):
+    policy = LearnedPolicy(policy=name, weights_root=weights_root)
+    out = policy.predict(_obs())
+    _assert_rigid(out.transform)
+    np.testing.assert_array_equal(out.transform, policy.predict(_obs()).transform)  # same input, same answer
+    if name != "tp":
+        assert out.diagnostics["flow"].shape == (256, 3)
+        assert 0.0 <= float(np.mean(out.diagnostics["w"])) <= 1.0
+    if name != "gf":
+        assert out.diagnostics["action_targets"].shape == (256, 3)
+        assert out.diagnostics["anchor_weights"].shape == (1024,)
+        assert out.diagnostics["anchor_weights"].sum() == pytest.approx(1.0, abs=1e-4)
+    assert policy.describe()["policy"] == name
+
+
+def test_registry_builds_the_learned_policies_and_wp_follows_best_json(weights_root):
+    best = json.loads((weights_root / "best.json").read_text())["policy"]
+    assert best == "wp-postsvd"
+    wp = make_policy("wp", weights_root=weights_root)
+    assert wp.config.policy == "wp-postsvd" and wp.describe()["alias_of"] == "wp-postsvd"
+    _assert_rigid(make_policy("gf", weights_root=weights_root).predict(_obs()).transform)
+
+
+def test_wp_without_best_json_falls_back_and_says_what_is_missing(tmp_path, weights_root):
+    shutil.copytree(weights_root / "gf", tmp_path / "gf")
+    with pytest.raises(FileNotFoundError, match=r"wp-postsvd-t.*wpbench train --policy wp-postsvd-t"):
+        make_policy("wp", weights_root=tmp_path)
+
+
+def test_oracle_switches_expert_by_the_ground_truth_kind(weights_root):
+    oracle = make_policy("oracle", weights_root=weights_root)
+    assert oracle.uses_ground_truth
+    gf, tp = (LearnedPolicy(policy=n, weights_root=weights_root) for n in ("gf", "tp"))
+    art = oracle.predict(_obs(1), {"kind": "articulated"})
+    free = oracle.predict(_obs(1), {"kind": "free-floating"})
+    assert art.diagnostics["oracle_choice"] == "articulated" and "flow" in art.diagnostics
+    assert free.diagnostics["oracle_choice"] == "free-floating" and "action_targets" in free.diagnostics
+    np.testing.assert_allclose(art.transform, gf.predict(_obs(1)).transform)
+    np.testing.assert_allclose(free.transform, tp.predict(_obs(1)).transform)
+    np.testing.assert_allclose(oracle.predict(_obs(1, kind=1)).transform, free.transform)  # obs["kind"] works too
+    with pytest.raises(ValueError, match="ground-truth kind"):
+        oracle.predict({**_obs(1), "kind": 7})
+
+
+def test_missing_weights_name_the_training_command(tmp_path):
+    with pytest.raises(FileNotFoundError, match="wpbench train --policy gf"):
+        LearnedPolicy(policy="gf", weights_root=tmp_path)
+
+
+@pytest.mark.parametrize("victim, content", [("model.pt", b"not a torch file"), ("config.json", b"{broken")])
+def test_corrupt_weights_give_a_clear_error(tmp_path, weights_root, victim, content):
+    shutil.copytree(weights_root / "gf", tmp_path / "gf")
+    (tmp_path / "gf" / victim).write_bytes(content)
+    with pytest.raises(ValueError, match=r"corrupt.*wpbench train --policy gf"):
+        LearnedPolicy(policy="gf", weights_root=tmp_path)
