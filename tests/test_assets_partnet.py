@@ -22,6 +22,7 @@ from wpbench.assets.cavity import VoxelGrid, door_cavity, drawer_inner_volume, l
 from wpbench.assets.partnet import (
     CATEGORY_TYPICAL_SIZE_M,
     DEFAULT_TYPICAL_SIZE_M,
+    PartNetLoadConfig,
     PartNetLoadError,
     category_scale,
     link_pieces,
@@ -81,7 +82,13 @@ def test_target_joint_and_limits(load_asset, object_id):
     link, joint, joint_type, (closed, opened) = EXPECTED[object_id]
     assert (asset.target_link, asset.target_joint, asset.joint_type) == (link, joint, joint_type)
     assert asset.closed_qpos == pytest.approx(closed, abs=1e-5)
-    assert asset.open_qpos == pytest.approx(opened, abs=1e-5)
+    assert asset.extra["open_qpos_limit"] == pytest.approx(opened, abs=1e-5)
+    if object_id == "12036":
+        # The fridge's handle meets its side wall before the pi limit: the goal is where
+        # physics stops the door, backed off a little, and well past a right angle.
+        assert math.pi / 2 < asset.open_qpos < opened - 0.1
+    else:
+        assert asset.open_qpos == pytest.approx(opened, abs=1e-5)
     assert asset.source == "partnet-mobility"
     assert asset.urdf.is_file() and DATASET not in asset.urdf.parents  # cache lives outside the dataset
 
@@ -194,7 +201,10 @@ def test_single_object_folder_and_scale_override(load_asset, tmp_path):
 def test_drawer_target_region_is_the_open_drawer_inside(tmp_path):
     # 45213's drawers are shallow (~3 cm inside at a realistic size): enlarged, the
     # drawer path must find the drawer's inner volume in the open state.
-    asset = load_partnet_object(DATASET / "45213", target_link="link_1", scale=1.5)
+    # Its coacd pieces jam the drawer's slide, so the reach probe would refuse it: off here,
+    # this test is about the drawer geometry.
+    asset = load_partnet_object(DATASET / "45213", target_link="link_1", scale=1.5,
+                                config=PartNetLoadConfig(probe_reach=False))
     assert (asset.target_joint, asset.joint_type) == ("joint_1", "prismatic")
     assert asset.closed_qpos == pytest.approx(0.0) and asset.open_qpos == pytest.approx(0.88 * 1.5, rel=1e-5)
     assert asset.extra["in_region_state"] == "open"

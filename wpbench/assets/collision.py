@@ -253,6 +253,36 @@ def run_coacd(mesh: trimesh.Trimesh, config: CoacdConfig) -> list[trimesh.Trimes
 # --------------------------------------------------------------------------- main entry point
 
 
+def _visual_with_existing_textures(obj_path: Path, cache_dir: Path) -> Path:
+    """``obj_path`` itself, or a cached copy whose .mtl drops texture maps that do not exist."""
+    if obj_path.suffix.lower() != ".obj" or not obj_path.is_file():
+        return obj_path
+    mtl_names = [line.split(None, 1)[1].strip() for line in obj_path.read_text(errors="replace").splitlines()
+                 if line.startswith("mtllib ") and len(line.split(None, 1)) == 2]
+    broken = False
+    cleaned: dict[str, str] = {}
+    for name in mtl_names:
+        mtl = obj_path.parent / name
+        if not mtl.is_file():
+            continue
+        lines = []
+        for line in mtl.read_text(errors="replace").splitlines():
+            if line.strip().startswith("map_") and not (mtl.parent / line.split()[-1]).is_file():
+                broken = True
+                continue
+            lines.append(line)
+        cleaned[name] = "\n".join(lines) + "\n"
+    if not broken:
+        return obj_path
+    key = _fingerprint(str(obj_path).encode(), obj_path.read_bytes(), *(t.encode() for t in cleaned.values()))
+    target = cache_dir / key / obj_path.name
+    if not target.is_file():
+        for name, text in cleaned.items():
+            _write_atomic(target.parent / name, text)
+        _write_atomic(target, obj_path.read_text(errors="replace"))
+    return target
+
+
 def build_hollow_collision_urdf(
     folder: Path, cache_dir: Path, coacd_config: CoacdConfig | None = None
 ) -> DerivedCollision:
@@ -326,11 +356,14 @@ def build_hollow_collision_urdf(
             collision = ET.SubElement(link, "collision")
             ET.SubElement(ET.SubElement(collision, "geometry"), "mesh", filename=str(piece_file.resolve()))
 
-    # Visual meshes: absolute paths into the dataset folder, which stays untouched.
+    # Visual meshes: absolute paths into the dataset folder, which stays untouched; a mesh
+    # whose material names a texture image the folder lacks gets a cached copy without it
+    # (the renderer aborts on a missing texture file).
     for mesh_el in root.iter("mesh"):
         filename = mesh_el.get("filename", "")
         if not Path(filename).is_absolute():
-            mesh_el.set("filename", str((source_urdf.parent / filename).resolve()))
+            path = (source_urdf.parent / filename).resolve()
+            mesh_el.set("filename", str(_visual_with_existing_textures(path, cache_dir / "visuals")))
 
     ET.indent(tree)
     text = ET.tostring(root, encoding="unicode")

@@ -42,6 +42,7 @@ import numpy as np
 
 from wpbench.assets.cavity import CavityConfig, door_cavity, drawer_inner_volume
 from wpbench.assets.collision import CoacdConfig, CollisionBuildError, build_hollow_collision_urdf
+from wpbench.assets.reach import reachable_open_qpos
 from wpbench.assets.spec import FurnitureAsset
 
 # Typical largest side (metres) of the closed object, per wpbench category.
@@ -85,6 +86,10 @@ class PartNetLoadConfig:
 
     coacd: CoacdConfig = CoacdConfig()
     cavity: CavityConfig = CavityConfig()
+    # Measure in physics how far the target really opens (see wpbench.assets.reach).
+    probe_reach: bool = True
+    # Refuse targets that physics lets open less than this fraction of their range.
+    min_reach_fraction: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -434,6 +439,16 @@ def load_partnet_object(
                 "or check the object's geometry."
             )
 
+    reachable = open_q
+    if config.probe_reach:
+        reachable = reachable_open_qpos(articulation, target.joint, closed_values, closed_q, open_q)
+        if (reachable - closed_q) / (open_q - closed_q) < config.min_reach_fraction:
+            raise PartNetLoadError(
+                f"{object_id}: {target.link} opens only to q={reachable:.3f} of its limit {open_q:.3f} in physics "
+                "(collision pieces block it); pick another target_link or rebuild its collision (delete "
+                f"{derived.urdf.parent})."
+            )
+    posed.set(closed_values)
     del articulation, scene
     return FurnitureAsset(
         object_id=object_id,
@@ -444,7 +459,7 @@ def load_partnet_object(
         target_joint=target.joint,
         joint_type="revolute" if target.is_door else "prismatic",
         closed_qpos=float(closed_q) + 0.0,  # + 0.0 turns a "-0.0" limit into 0.0
-        open_qpos=float(open_q),
+        open_qpos=float(reachable),
         in_region=region,
         bounds_low=tuple(float(v) for v in bounds_low),
         bounds_high=tuple(float(v) for v in bounds_high),
@@ -459,6 +474,7 @@ def load_partnet_object(
             "collision_source": derived.source,
             "coacd_seconds": derived.coacd_seconds,
             "in_region_state": region_state,
+            "open_qpos_limit": float(open_q),  # the URDF limit; open_qpos is what physics reaches
             "target_label": target.label,
         },
     )

@@ -12,6 +12,8 @@ are kept as lists beside the tensors for per-category reporting.
 
 from __future__ import annotations
 
+import hashlib
+import json
 from pathlib import Path
 
 import numpy as np
@@ -36,9 +38,14 @@ class CrossPoseDataset(Dataset):
         self.directory = Path(directory)
         self.manifest = read_manifest(self.directory)
         parts: dict[str, list[dict[str, np.ndarray]]] = {k: [] for k in kinds}
+        used = []
         for entry in self.manifest["shards"]:
             if entry["kind"] in parts:
                 parts[entry["kind"]].append(read_shard(self.directory / entry["path"]))
+                used.append(entry)
+        # Identifies exactly the samples loaded (shards of other kinds may still be growing).
+        content = json.dumps({"fingerprint": self.manifest["fingerprint"], "shards": used}, sort_keys=True)
+        self.content_hash = hashlib.sha256(content.encode()).hexdigest()[:16]
         arrays: list[dict[str, np.ndarray]] = []
         for kind in kinds:
             if not parts[kind]:

@@ -99,7 +99,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     train_set, val_set = _load_data(config, spec)
-    data_hashes = {"train": train_set.manifest["content_hash"], "val": val_set.manifest["content_hash"]}
+    data_hashes = {"train": train_set.content_hash, "val": val_set.content_hash}
     model, origin = build_policy_model(spec, config)
     lr = config.learning_rate if config.learning_rate is not None else spec.learning_rate
     optimizer = torch.optim.Adam(model.parameters(), lr=lr)
