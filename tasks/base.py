@@ -155,6 +155,7 @@ class CrossPoseEnv(BaseEnv):
         builder.initial_pose = sapien.Pose(p=[0.0, 0.0, -self.asset.bounds_low[2]])
         self._ms_furniture = builder.build(name="furniture")
         self.furniture = SceneFurniture(self.asset, self._ms_furniture._objs[0])
+        self.lift = self._floor_clearance()
         ground = self.scene.create_actor_builder()
         ground.add_box_collision(sapien.Pose(p=[0, 0, -0.05]), half_size=[20, 20, 0.05])
         ground.add_box_visual(sapien.Pose(p=[0, 0, -0.05]), half_size=[20, 20, 0.05],
@@ -171,6 +172,24 @@ class CrossPoseEnv(BaseEnv):
             self.free_body = raw_body(self._ms_free)
             self.free_mesh = self.free_spec.visual_mesh(self.free_scale)
 
+    def _floor_clearance(self) -> float:
+        """How much to raise the furniture so its door never sweeps through the floor.
+
+        Some real objects (PartNet-Mobility oven 101773) have a bottom hinge at floor level:
+        standing on the floor, the door could not open. Raised by this much they stand as a
+        wall oven is mounted. Yaw and xy do not change heights, so this is per asset.
+        """
+        f = self.furniture
+        root = np.eye(4)
+        root[2, 3] = -self.asset.bounds_low[2]
+        f.articulation.set_root_pose(matrix_to_pose(root))
+        link_mesh = f.link_mesh(f.target_link)
+        lowest = np.inf
+        for q in np.linspace(self.asset.closed_qpos, self.asset.open_qpos, 13):
+            pose = f.target_link_pose_at(np.array([q]))[0]
+            lowest = min(lowest, float(transform_points(pose, link_mesh.vertices)[:, 2].min()))
+        return max(0.0, 0.005 - lowest)
+
     def _episode_np_rng(self) -> np.random.Generator:
         """numpy Generator seeded by the episode seed: same seed, same scene, same numbers."""
         return np.random.default_rng(int(self._episode_seed[0]) + 7919 * self._rng_calls())
@@ -186,7 +205,7 @@ class CrossPoseEnv(BaseEnv):
         yaw = float(rng.uniform(-np.pi, np.pi))
         xy = rng.uniform(-0.3, 0.3, size=2)
         self.root_pose = yaw_matrix(yaw)
-        self.root_pose[:3, 3] = [xy[0], xy[1], -self.asset.bounds_low[2]]
+        self.root_pose[:3, 3] = [xy[0], xy[1], -self.asset.bounds_low[2] + self.lift]
         self.furniture.articulation.set_root_pose(matrix_to_pose(self.root_pose))
         self.stage_index = 0
         self.stage_results: list[dict] = []

@@ -10,7 +10,8 @@ For each model at two sizes
 it reports the parameter count, the inference latency of one sample
 (median over repeats, ``torch.no_grad``, eval mode) and the time of one
 training step at batch 16 (forward, the model's loss preset, backward, Adam
-step; median over repeats). Inputs are random clouds with a random rigid
+step; median over repeats), each as wall time and as process CPU time
+(summed over threads; steadier on a shared machine). Inputs are random clouds with a random rigid
 goal; speed does not depend on their content. The reference size is slow
 (tens of seconds per training step) and gets ``reference_repeats`` runs.
 
@@ -54,15 +55,21 @@ def _random_batch(batch: int, action_points: int, anchor_points: int, seed: int)
     return {"action": action, "anchor": anchor, "gt_transform": se3.make_transform(rotation, translation)}
 
 
-def _median_seconds(step: Callable[[], Any], repeats: int, warmup: int) -> float:
+def _median_seconds(step: Callable[[], Any], repeats: int, warmup: int) -> tuple[float, float]:
+    """Median wall time and median process CPU time (all threads) of ``step``, in seconds.
+
+    CPU time is what the step costs this process; on a busy machine it is the
+    steadier figure (wall time also counts waiting for a core).
+    """
     for _ in range(warmup):
         step()
-    times = []
+    wall, cpu = [], []
     for _ in range(repeats):
-        start = time.perf_counter()
+        start_wall, start_cpu = time.perf_counter(), time.process_time()
         step()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
+        wall.append(time.perf_counter() - start_wall)
+        cpu.append(time.process_time() - start_cpu)
+    return statistics.median(wall), statistics.median(cpu)
 
 
 def measure(name: str, size: str, repeats: int, warmup: int, seed: int = 0) -> dict[str, Any]:
@@ -79,7 +86,7 @@ def measure(name: str, size: str, repeats: int, warmup: int, seed: int = 0) -> d
         with torch.no_grad():
             model(sample["action"], sample["anchor"])
 
-    infer_s = _median_seconds(infer, repeats, warmup)
+    infer_s, infer_cpu_s = _median_seconds(infer, repeats, warmup)
 
     model.train()
     optimizer = torch.optim.Adam(model.parameters(), lr=1e-4)
@@ -91,7 +98,7 @@ def measure(name: str, size: str, repeats: int, warmup: int, seed: int = 0) -> d
         loss.backward()
         optimizer.step()
 
-    train_s = _median_seconds(train_step, repeats, warmup)
+    train_s, train_cpu_s = _median_seconds(train_step, repeats, warmup)
     encoder = config.taxpose.encoder if name == "weightedpose" else config.encoder
     return {
         "model": name,
@@ -99,6 +106,8 @@ def measure(name: str, size: str, repeats: int, warmup: int, seed: int = 0) -> d
         "params": sum(p.numel() for p in model.parameters()),
         "infer_ms": infer_s * 1000.0,
         "train_step_s": train_s,
+        "infer_cpu_ms": infer_cpu_s * 1000.0,
+        "train_step_cpu_s": train_cpu_s,
         "action_points": action_points,
         "anchor_points": anchor_points,
         "train_batch": TRAIN_BATCH,
@@ -147,10 +156,11 @@ def run(
 
     table = [
         [r["model"], r["size"], f"{r['action_points']}+{r['anchor_points']}", r["k"], r["emb_dim"],
-         f"{r['params']:,}", f"{r['infer_ms']:.1f}", f"{r['train_step_s']:.2f}"]
+         f"{r['params']:,}", f"{r['infer_ms']:.1f}", f"{r['train_step_s']:.2f}",
+         f"{r['infer_cpu_ms']:.1f}", f"{r['train_step_cpu_s']:.2f}"]
         for r in rows
     ]
-    headers = ["model", "size", "points", "k", "emb", "params", "infer ms (1 sample)", f"train step s (batch {TRAIN_BATCH})"]
+    headers = ["model", "size", "points", "k", "emb", "params", "infer ms (1 sample)", f"train step s (batch {TRAIN_BATCH})", "infer CPU ms", "train CPU s"]
     print(tabulate(table, headers=headers))
     print(f"threads={threads}, 1-min load average at start {load_average:.1f} (timings pessimistic if > threads)")
     if json_path is not None:

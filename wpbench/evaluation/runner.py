@@ -183,7 +183,10 @@ def run_benchmark(
     meta = {
         "policy": cfg.policy, "task": cfg.task, "split": cfg.split, "asset_source": cfg.assets,
         "obs": cfg.obs, "seed": cfg.seed,
-        "timings": {"wall_s": time.perf_counter() - started,
+        # Episode times come from the records, so a resumed run reports the whole run;
+        # peak memory is this process's (a resumed run's is the last session's).
+        "timings": {"wall_s": float(sum(r.get("timings", {}).get("episode_s", 0.0) for r in records)),
+                    "session_wall_s": time.perf_counter() - started,
                     "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024},
         "policy_info": policy.describe(),
     }

@@ -78,18 +78,20 @@ class WeightedPose(nn.Module):
         model = cls(config)
         _load_branch(model.taxpose, taxpose_state, "TAX-Pose", "config.taxpose")
         own = model.goalflow.state_dict()
-        mismatched = sorted(
-            key for key, value in goalflow_state.items()
-            if key.startswith(_MIXING_HEAD_PREFIX) and key in own and tuple(value.shape) != tuple(own[key].shape)
+        head_keys = [key for key in own if key.startswith(_MIXING_HEAD_PREFIX)]
+        head_fits = all(
+            key in goalflow_state and tuple(goalflow_state[key].shape) == tuple(own[key].shape) for key in head_keys
         )
-        kept = {key: value for key, value in goalflow_state.items() if key not in mismatched}
-        if mismatched:
+        kept = dict(goalflow_state)
+        if not head_fits:
+            # Load the head whole or not at all: half a head trained for another input is noise.
             warnings.warn(
-                f"Goal Flow mixing head shapes differ from w_mode={model.config.w_mode!r}; "
-                f"keeping it freshly initialised (w = 0.5): {mismatched}",
+                f"Goal Flow mixing head does not fit w_mode={model.config.w_mode!r} "
+                "(trained for the other mode); keeping it freshly initialised (w = 0.5)",
                 stacklevel=2,
             )
-            kept.update({key: own[key] for key in mismatched})
+            kept = {key: value for key, value in kept.items() if not key.startswith(_MIXING_HEAD_PREFIX)}
+            kept.update({key: own[key] for key in head_keys})
         _load_branch(model.goalflow, kept, "Goal Flow", "config.goalflow")
         return model
 

@@ -10,12 +10,9 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import numpy as np
 import sapien
 
-
-def cache_root() -> Path:
-    return Path(os.environ.get("WPBENCH_CACHE", Path.home() / ".cache" / "wpbench"))
+from wpbench.assets.library import cache_root
 
 
 def _mesh_files(obj) -> tuple[Path, list[Path]]:

@@ -1,0 +1,136 @@
+"""Behaviour every cross-pose model must have: shapes, rigid output, equivariance, no batch coupling."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from models_helpers import MODEL_NAMES, scene, small_model
+from wpbench.geometry import se3
+from wpbench.models import build_model
+
+EXPECTED_DIAGNOSTICS = {
+    "taxpose": {"action_targets": "NA3", "action_weights": "NA", "anchor_sources": "NB3", "anchor_weights": "NB"},
+    "goalflow": {"flow": "NA3", "w": "B"},
+    "weightedpose": {
+        "flow": "NA3", "w": "B", "action_targets": "NA3", "action_weights": "NA",
+        "anchor_sources": "NB3", "anchor_weights": "NB", "taxpose_transform": "T", "goalflow_transform": "T",
+    },
+}
+
+
+def _expected_shape(code: str, B: int, NA: int, NB: int) -> tuple[int, ...]:
+    return {"NA3": (B, NA, 3), "NA": (B, NA), "NB3": (B, NB, 3), "NB": (B, NB), "B": (B,), "T": (B, 4, 4)}[code]
+
+
+def _assert_rigid(T: torch.Tensor, atol: float) -> None:
+    R = T[:, :3, :3]
+    eye = torch.eye(3, dtype=T.dtype).expand_as(R)
+    assert torch.allclose(R.transpose(1, 2) @ R, eye, atol=atol)
+    assert torch.allclose(torch.linalg.det(R), torch.ones(T.shape[0], dtype=T.dtype), atol=atol)
+    bottom = torch.tensor([0.0, 0.0, 0.0, 1.0], dtype=T.dtype).expand(T.shape[0], 4)
+    assert torch.equal(T[:, 3], bottom)
+
+
+@pytest.mark.parametrize("name", MODEL_NAMES)
+def test_default_model_output_shapes_finite_and_rigid(name):
+    """Default sizes, default point counts (256 + 1024), float32."""
+    torch.manual_seed(0)
+    model = build_model(name).eval()
+    data = scene(batch=2, action_points=256, anchor_points=1024)
+    with torch.no_grad():
+        out = model(data["action"], data["anchor"])
+    assert out.transform.shape == (2, 4, 4) and out.transform.dtype == torch.float32
+    assert torch.isfinite(out.transform).all()
+    _assert_rigid(out.transform, atol=1e-5)
+    assert set(out.diagnostics) == set(EXPECTED_DIAGNOSTICS[name])
+    for key, code in EXPECTED_DIAGNOSTICS[name].items():
+        assert out.diagnostics[key].shape == _expected_shape(code, 2, 256, 1024), key
+        assert torch.isfinite(out.diagnostics[key]).all(), key
+
+
+@pytest.mark.parametrize("name", ["taxpose", "weightedpose"])
+def test_correspondence_weights_are_normalised_distributions(name):
+    data = scene(batch=2, dtype=torch.float64)
+    with torch.no_grad():
+        out = small_model(name)(data["action"], data["anchor"])
+    for key in ("action_weights", "anchor_weights"):
+        weights = out.diagnostics[key]
+        assert (weights >= 0).all()
+        assert torch.allclose(weights.sum(dim=1), torch.ones(2, dtype=weights.dtype))
+
+
+def test_mixing_weight_is_a_proportion_per_sample_or_per_point():
+    torch.manual_seed(0)
+    data = scene(batch=2, dtype=torch.float64)
+    for mode, shape in (("per_sample", (2,)), ("per_point", (2, 48))):
+        from models_helpers import small_overrides
+
+        model = build_model("weightedpose", **small_overrides("weightedpose", w_mode=mode)).double().eval()
+        # Make w differ from the 0.5 it starts at, so the range check means something.
+        torch.nn.init.normal_(model.goalflow.mixing_head[-1].weight, std=3.0)
+        with torch.no_grad():
+            w = model(data["action"], data["anchor"]).diagnostics["w"]
+        assert w.shape == shape
+        assert ((w > 0) & (w < 1)).all() and w.std() > 0
+
+
+@pytest.mark.parametrize("dynamic_graph", [False, True])
+@pytest.mark.parametrize("name", MODEL_NAMES)
+@settings(max_examples=5, deadline=None)
+@given(shift=st.tuples(*[st.floats(-3.0, 3.0)] * 3))
+def test_translation_equivariance(name, dynamic_graph, shift):
+    """Moving both clouds by t moves the predicted goal of the action by t: T' (p + t) = T p + t."""
+    model = small_model(name, dynamic_graph)
+    data = scene(batch=1, dtype=torch.float64)
+    t = torch.tensor(shift, dtype=torch.float64)
+    with torch.no_grad():
+        T = model(data["action"], data["anchor"]).transform
+        T_moved = model(data["action"] + t, data["anchor"] + t).transform
+    goal = se3.apply(T, data["action"])
+    goal_moved = se3.apply(T_moved, data["action"] + t)
+    assert torch.allclose(goal_moved, goal + t, atol=1e-8)
+
+
+@pytest.mark.parametrize("dynamic_graph", [False, True])
+@pytest.mark.parametrize("name", MODEL_NAMES)
+def test_sample_alone_equals_sample_in_batch(name, dynamic_graph):
+    model = small_model(name, dynamic_graph)
+    data = scene(batch=3, seed=5, dtype=torch.float64)
+    with torch.no_grad():
+        batched = model(data["action"], data["anchor"])
+        alone = model(data["action"][1:2], data["anchor"][1:2])
+    assert torch.allclose(batched.transform[1:2], alone.transform, atol=1e-10)
+    for key, value in alone.diagnostics.items():
+        assert torch.allclose(batched.diagnostics[key][1:2], value, atol=1e-10), key
+
+
+def test_samples_do_not_couple_in_training_mode_either():
+    """Training mode uses the same per-sample normalisation (no BatchNorm)."""
+    model = small_model("weightedpose")
+    data = scene(batch=2, seed=3, dtype=torch.float64)
+    model.train()
+    try:
+        with torch.no_grad():
+            batched = model(data["action"], data["anchor"]).transform
+            alone = model(data["action"][:1], data["anchor"][:1]).transform
+    finally:
+        model.eval()
+    assert torch.allclose(batched[:1], alone, atol=1e-10)
+
+
+@pytest.mark.parametrize(
+    "action, anchor, match",
+    [
+        (torch.randn(48, 3), torch.randn(1, 96, 3), r"\(B, N, 3\)"),
+        (torch.randn(2, 48, 3), torch.randn(1, 96, 3), "batch sizes differ"),
+        (torch.randn(1, 4, 3), torch.randn(1, 96, 3), "at least 8"),
+        (torch.randn(1, 48, 2), torch.randn(1, 96, 3), r"\(B, N, 3\)"),
+    ],
+)
+def test_bad_input_gets_a_clear_error(action, anchor, match):
+    model = small_model("taxpose", dtype=torch.float32)
+    with pytest.raises(ValueError, match=match):
+        model(action, anchor)
