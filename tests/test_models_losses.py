@@ -55,7 +55,7 @@ def test_presets_use_different_terms():
     assert used["wp-postsvd-t"] == ("post_svd_point", "rotation", "translation")
     assert "goal_flow" not in used["tp"] and used["gf"] == ("goal_flow",)
     assert len(set(used.values())) == len(used)
-    assert LOSS_PRESETS["wp-og"].taxpose_pose == "taxpose_branch"
+    assert LOSS_PRESETS["wp-og"].taxpose_pose == "output"
 
 
 def test_presets_are_frozen():
@@ -110,8 +110,8 @@ def _mixing_head_gradient(preset: str) -> float:
     return 0.0 if grad is None else grad.abs().sum().item()
 
 
-def test_only_post_svd_presets_train_the_mixing_weight():
-    """wp-og supervises the branches separately, so w never sees a gradient; post-SVD trains it."""
-    assert _mixing_head_gradient("wp-og") == 0.0
+def test_every_weightedpose_preset_trains_the_mixing_weight():
+    """Each WeightedPose preset has a term on the fused pose, the only path to w."""
+    assert _mixing_head_gradient("wp-og") > 0.0
     assert _mixing_head_gradient("wp-postsvd") > 0.0
     assert _mixing_head_gradient("wp-postsvd-t") > 0.0

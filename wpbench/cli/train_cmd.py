@@ -21,6 +21,7 @@ def train(
     steps_per_epoch: int = typer.Option(40, min=1, help="Optimiser steps between validation + checkpoint."),
     max_steps: int = typer.Option(None, min=1, help="Stop after this many optimiser steps (whatever the budget)."),
     learning_rate: float = typer.Option(None, help="Adam learning rate [default: 1e-3 baselines, 3e-4 WeightedPose]."),
+    lr_schedule: str = typer.Option("cosine", help="constant, or cosine (decay to 5% over the time budget)."),
     num_action_points: int = typer.Option(128, min=8, help="Action points per cloud in training (random subset)."),
     num_anchor_points: int = typer.Option(512, min=8, help="Anchor points per cloud in training (random subset)."),
     val_per_kind: int = typer.Option(32, min=1, help="Validation samples per kind after each epoch."),
@@ -55,7 +56,7 @@ def train(
     try:
         config = TrainConfig(
             policy=policy, data=data, out=out, weights_root=weights_root, minutes=minutes, max_steps=max_steps,
-            steps_per_epoch=steps_per_epoch, batch_size=batch_size, learning_rate=learning_rate,
+            steps_per_epoch=steps_per_epoch, batch_size=batch_size, learning_rate=learning_rate, lr_schedule=lr_schedule,
             num_action_points=num_action_points, num_anchor_points=num_anchor_points, augment_yaw=augment,
             val_per_kind=val_per_kind, final_val_per_kind=final_val_per_kind, seed=seed, threads=threads,
         )

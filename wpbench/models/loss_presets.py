@@ -4,10 +4,12 @@ Each preset is one frozen ``LossPreset`` in ``LOSS_PRESETS``; a weight of 0
 leaves the term out (it is not even computed). The WeightedPose presets are
 the three rows of the paper's table:
 
-- ``wp-og``: the original TAX-Pose losses on the TAX-Pose branch's own pose
-  (``taxpose_transform``) + flow supervision on the Goal Flow branch; no loss
-  sees the fused SVD, so the mixing weight w gets no gradient from it (it
-  stays at its initial value unless the model starts from a trained w).
+- ``wp-og``: the original TAX-Pose losses, as TAX-Pose applies them to its own
+  final SVD pose, here to WeightedPose's fused pose (point displacement and
+  correspondence consistency), plus direct supervision of the intermediate
+  predictions: TAX-Pose's correspondences and Goal Flow's flow. The fused pose
+  is what trains the mixing weight w (with the displacement term on the
+  TAX-Pose branch alone, w would get no gradient at all).
 - ``wp-postsvd``: only the point loss after the final, fused weighted SVD
   (trains both branches and w end to end).
 - ``wp-postsvd-t``: post-SVD point loss + a direct SE(3) loss on the fused pose.
@@ -86,7 +88,7 @@ LOSS_PRESETS: dict[str, LossPreset] = {
         LossPreset(name="gf", goal_flow=1.0),
         LossPreset(
             name="wp-og",
-            taxpose_pose="taxpose_branch",
+            taxpose_pose="output",
             point_displacement=1.0,
             direct_correspondence=1.0,
             correspondence_consistency=0.1,

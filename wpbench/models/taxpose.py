@@ -52,7 +52,7 @@ class TaxPose(nn.Module):
     def correspondence_terms(self, action: torch.Tensor, anchor: torch.Tensor) -> dict[str, torch.Tensor]:
         """The dual-flow SVD inputs: action_targets, action_weights, anchor_sources, anchor_weights."""
         check_point_clouds(action, anchor, min_points=self.config.encoder.k)
-        action_features = self.action_encoder(action)
+        action_features = self.action_encoder(action - action.mean(dim=1, keepdim=True))
         anchor_features = self.anchor_encoder(anchor - anchor.mean(dim=1, keepdim=True))
         action_features, anchor_features = self.cross_attention(action_features, anchor_features)
 

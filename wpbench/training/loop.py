@@ -79,6 +79,14 @@ def _load_data(config: TrainConfig, spec: PolicySpec) -> tuple[CrossPoseDataset,
     return train_set, val_set
 
 
+def scheduled_lr(base: float, schedule: str, elapsed: float, budget: float) -> float:
+    """Learning rate after ``elapsed`` of ``budget`` seconds ("cosine": base -> 5% of base)."""
+    if schedule == "constant":
+        return base
+    progress = min(max(elapsed / budget, 0.0), 1.0)
+    return base * (0.05 + 0.95 * 0.5 * (1.0 + math.cos(math.pi * progress)))
+
+
 def _val_row(results: dict[str, dict[str, float]]) -> dict[str, float]:
     row: dict[str, float] = {}
     for kind, values in results.items():
@@ -136,6 +144,8 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
         sums: dict[str, float] = {}
         steps_done = skipped = 0
         while steps_done < config.steps_per_epoch and not (config.max_steps is not None and step >= config.max_steps):
+            for group in optimizer.param_groups:
+                group["lr"] = scheduled_lr(lr, config.lr_schedule, elapsed + time.perf_counter() - started, budget)
             batch = prepare(make_batch(train_set, next(batches)), config.num_action_points,
                             config.num_anchor_points, config.augment_yaw, generator)
             output = model(batch["action"], batch["anchor"])
@@ -161,6 +171,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
         epoch += 1
         good = max(steps_done - skipped, 1)
         row = {"epoch": epoch, "step": step, "elapsed_s": round(elapsed, 1), "skipped_steps": skipped,
+               "lr": optimizer.param_groups[0]["lr"],
                **{k: v / good for k, v in sums.items()}, **_val_row(results)}
         rows.append(row)
         save_checkpoint(out, {"policy": config.policy, "data": data_hashes, "model": model.state_dict(),
