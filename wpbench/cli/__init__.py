@@ -56,6 +56,8 @@ LAZY_COMMANDS: tuple[LazyCommand, ...] = (
     LazyCommand("data", "wpbench.cli.data_cmd", "app", "Generate training data from the simulator."),
     LazyCommand("train", "wpbench.cli.train_cmd", "app", "Train the cross-pose models."),
     LazyCommand("bench", "wpbench.cli.bench_cmd", "app", "Speed and memory benchmarks (print tables)."),
+    LazyCommand("paper-table", "wpbench.cli.paper_table_cmd", "paper_table",
+                "Write results/paper-table.md (the paper's Table 1 layout + simulated success)."),
     LazyCommand(
         "leaderboard", "wpbench.cli.leaderboard_cmd", "leaderboard",
         "Collect results/**/summary.json into leaderboard md/csv/png.",

@@ -12,6 +12,7 @@ For a two-stage episode the top-level errors are the mean over its stages and
 
 from __future__ import annotations
 
+import json
 import resource
 import time
 from dataclasses import asdict, dataclass, field
@@ -190,6 +191,13 @@ def run_benchmark(
                     "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024},
         "policy_info": policy.describe(),
     }
+    previous = out / "summary.json"
+    if previous.is_file():  # a resumed run: memory peaked in whichever session was largest
+        try:
+            before = json.loads(previous.read_text())["timings"]["run"]["peak_rss_mib"]
+            meta["timings"]["peak_rss_mib"] = max(meta["timings"]["peak_rss_mib"], float(before))
+        except (KeyError, TypeError, ValueError):
+            pass
     summary = summarize(records, meta)
     write_summary(out, summary)
     summary["_out_dir"] = str(out)

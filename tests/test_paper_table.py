@@ -1,0 +1,35 @@
+"""The paper table: layout, numbers in the right cells, missing weights and runs said plainly."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from wpbench.evaluation.paper_table import KINDS, SPLITS, PaperTableConfig, make_paper_table, render
+
+
+def test_render_puts_each_number_in_its_cell():
+    cfg = PaperTableConfig(policies=("gf", "tp"))
+    errors = {"gf": {(s, k): {"rot_deg": 1.25 if k == "articulated" else 40.0, "trans_m": 0.012,
+                              "point_m": 0.034, "n": 10} for s in SPLITS for k in KINDS}}
+    successes = {("gf", "open-door"): {"success_rate": 0.9, "success_ci95": [0.8, 0.95], "episodes": 100}}
+    text = render(cfg, errors, successes)
+    gf_row = next(line for line in text.splitlines() if line.startswith("| gf |") and "/" in line)
+    cells = [c.strip() for c in gf_row.strip("|").split("|")][1:]
+    assert cells == ["40.0 / 1.2 / 3.4", "1.2 / 1.2 / 3.4"] * 2
+    assert "| tp | no weights" in text
+    assert "90% [80, 95] (n=100)" in text and "not run" in text
+
+
+def test_nan_errors_are_not_numbers():
+    cfg = PaperTableConfig(policies=("gf",))
+    errors = {"gf": {(s, k): {"rot_deg": math.nan, "trans_m": math.nan, "point_m": math.nan, "n": 0}
+                     for s in SPLITS for k in KINDS}}
+    assert "n/a / n/a / n/a" in render(cfg, errors, {})
+
+
+def test_missing_weights_give_a_table_that_says_so(tmp_path: Path, monkeypatch):
+    monkeypatch.setenv("WPBENCH_WEIGHTS_DIR", str(tmp_path / "no-weights"))
+    cfg = PaperTableConfig(data=tmp_path, policies=("no-such-policy",), run_missing=False, results=tmp_path)
+    out = make_paper_table(cfg)
+    assert "no-such-policy | no weights" in out.read_text()

@@ -1,0 +1,29 @@
+"""``wpbench paper-table``: results/paper-table.md in one command."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+
+def paper_table(
+    data: Path = typer.Option(Path("data"), help="Data root made by `wpbench data generate` (train/ and val/)."),
+    samples: int = typer.Option(200, min=1, help="Samples per split and kind for the pose errors."),
+    episodes: int = typer.Option(100, min=1, help="Simulated episodes per policy and task."),
+    obs: str = typer.Option("camera", help="Observation mode of the simulated runs."),
+    run_missing: bool = typer.Option(True, help="Run the simulations that results/runs lacks."),
+    out: Path = typer.Option(Path("results/paper-table.md"), help="Markdown file to write."),
+) -> None:
+    """Pose errors (train/val x free-floating/articulated) and simulated success of every learned policy."""
+    from wpbench.cli.choices import check_choice
+    from wpbench.evaluation.paper_table import PaperTableConfig, make_paper_table
+
+    check_choice("observation mode", obs, ("camera", "mesh"))
+    if not (data / "train").is_dir() or not (data / "val").is_dir():
+        raise typer.BadParameter(f"{data} lacks train/ and val/; make them with `wpbench data generate --out {data}`")
+    cfg = PaperTableConfig(data=data, samples_per_kind=samples, episodes=episodes, obs=obs, run_missing=run_missing,
+                           results=out.parent)
+    path = make_paper_table(cfg, out)
+    typer.echo(path.read_text())
+    typer.echo(f"written: {path}")

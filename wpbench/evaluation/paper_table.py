@@ -1,0 +1,139 @@
+"""``results/paper-table.md``: the layout of the WeightedPose paper's Table 1,
+plus what the simulator says.
+
+Two tables, one command (``wpbench paper-table``):
+
+1. Pose errors on the generated data set (no simulation): for each policy, the
+   train and val splits, free-floating and articulated samples, mean rotation
+   error (deg), translation error (cm) and per-point error (cm).
+2. Simulated success rate (95% Wilson interval) of each policy on every task,
+   val split, built-in furniture: read from ``results/runs/<policy>__<task>__val__procedural__<obs>``
+   and, with ``run_missing``, run there first.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+POLICIES = ("gf", "tp", "oracle", "wp-og", "wp-postsvd", "wp-postsvd-t")
+TASKS = ("open-door", "place-in", "open-then-place")
+KINDS = ("free-floating", "articulated")
+SPLITS = ("train", "val")
+
+
+@dataclass
+class PaperTableConfig:
+    data: Path = Path("data")
+    samples_per_kind: int = 200
+    episodes: int = 100
+    obs: str = "camera"
+    run_missing: bool = True
+    results: Path = Path("results")
+    policies: tuple[str, ...] = POLICIES
+
+
+def _models_for(policy: str):
+    """{kind: torch model} answering each kind for ``policy`` (the oracle routes by kind)."""
+    from policies.learned import LearnedPolicy
+
+    if policy == "oracle":
+        return {"articulated": LearnedPolicy(policy="gf").model, "free-floating": LearnedPolicy(policy="tp").model}
+    model = LearnedPolicy(policy=policy).model
+    return {kind: model for kind in KINDS}
+
+
+def pose_errors(cfg: PaperTableConfig, policy: str) -> dict[tuple[str, str], dict[str, float]]:
+    """{(split, kind): {"rot_deg", "trans_m", "point_m", "n"}} on the data set."""
+    from wpbench.data.dataset import CrossPoseDataset
+    from wpbench.training.evaluate import evaluate
+
+    models = _models_for(policy)
+    out = {}
+    for split in SPLITS:
+        directory = Path(cfg.data) / split
+        for kind in KINDS:
+            dataset = CrossPoseDataset(directory, kinds=(kind,))
+            result = evaluate(models[kind], dataset, (kind,), cfg.samples_per_kind, dataset.action.shape[1],
+                              dataset.anchor.shape[1])
+            out[(split, kind)] = result[kind]
+    return out
+
+
+def run_dir(cfg: PaperTableConfig, policy: str, task: str) -> Path:
+    return Path(cfg.results) / "runs" / f"{policy}__{task}__val__procedural__{cfg.obs}"
+
+
+def success(cfg: PaperTableConfig, policy: str, task: str) -> dict | None:
+    """The run's summary (running it first when missing and allowed), or None."""
+    import json
+
+    from wpbench.evaluation.runner import RunConfig, run_benchmark
+
+    directory = run_dir(cfg, policy, task)
+    summary_file = directory / "summary.json"
+    if summary_file.is_file():
+        summary = json.loads(summary_file.read_text())
+        if summary.get("episodes", 0) >= cfg.episodes or not cfg.run_missing:
+            return summary
+    if not cfg.run_missing:
+        return None
+    return run_benchmark(RunConfig(policy=policy, task=task, split="val", episodes=cfg.episodes, obs=cfg.obs,
+                                   out=directory, resume=True))
+
+
+def _fmt(value: float, scale: float = 1.0, digits: int = 1) -> str:
+    return "n/a" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value * scale:.{digits}f}"
+
+
+def render(cfg: PaperTableConfig, errors: dict, successes: dict) -> str:
+    lines = ["# WeightedPose, paper Table 1 layout (wpbench)", "",
+             "Made by `wpbench paper-table`. Pose errors are on the generated data set "
+             f"(`{cfg.data}`, up to {cfg.samples_per_kind} samples per split and kind, camera point clouds); "
+             "success rates are simulated episodes on the val split (unseen built-in furniture), "
+             f"obs `{cfg.obs}`, with 95% Wilson intervals.", "",
+             "## Pose errors (rotation deg / translation cm / per-point cm)", ""]
+    header = "| policy | " + " | ".join(f"{s} {k}" for s in SPLITS for k in KINDS) + " |"
+    lines += [header, "|" + "---|" * (1 + len(SPLITS) * len(KINDS))]
+    for policy in cfg.policies:
+        if policy not in errors:
+            lines.append(f"| {policy} | " + " | ".join("no weights" for _ in range(len(SPLITS) * len(KINDS))) + " |")
+            continue
+        cells = []
+        for split in SPLITS:
+            for kind in KINDS:
+                e = errors[policy][(split, kind)]
+                cells.append(f"{_fmt(e['rot_deg'])} / {_fmt(e['trans_m'], 100)} / {_fmt(e['point_m'], 100)}")
+        lines.append(f"| {policy} | " + " | ".join(cells) + " |")
+    lines += ["", f"## Simulated success rate (val split, {cfg.obs})", "",
+              "| policy | " + " | ".join(TASKS) + " |", "|" + "---|" * (1 + len(TASKS))]
+    for policy in cfg.policies:
+        cells = []
+        for task in TASKS:
+            s = successes.get((policy, task))
+            if s is None:
+                cells.append("not run")
+            else:
+                lo, hi = s["success_ci95"]
+                cells.append(f"{100 * s['success_rate']:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}] (n={s['episodes']})")
+        lines.append(f"| {policy} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def make_paper_table(cfg: PaperTableConfig, out: Path | None = None) -> Path:
+    errors, successes = {}, {}
+    for policy in cfg.policies:
+        try:
+            errors[policy] = pose_errors(cfg, policy)
+        except (FileNotFoundError, ValueError) as err:
+            print(f"{policy}: no pose errors ({err})")
+            continue
+        for task in TASKS:
+            summary = success(cfg, policy, task)
+            if summary is not None:
+                successes[(policy, task)] = summary
+    out = Path(out) if out is not None else Path(cfg.results) / "paper-table.md"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(render(cfg, errors, successes))
+    return out
