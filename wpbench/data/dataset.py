@@ -7,7 +7,8 @@ every epoch.
 Item (one sample): ``action`` (NA, 3) float32, ``anchor`` (NB, 3) float32,
 ``gt_transform`` (4, 4) float32, ``kind`` () int64 (0 articulated, 1 free),
 ``index`` () int64 (position in the dataset). ``categories`` / ``object_ids``
-are kept as lists beside the tensors for per-category reporting.
+are kept as lists beside the tensors for per-category reporting; ``content_hash``
+identifies exactly the shards loaded (a resumed training run checks it).
 """
 
 from __future__ import annotations
