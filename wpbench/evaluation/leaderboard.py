@@ -43,6 +43,7 @@ LEADERBOARD_COLUMNS: tuple[str, ...] = (
     "policy",
     "split",
     "asset_source",
+    "obs",
     "episodes",
     "successes",
     "success_rate",
@@ -109,6 +110,7 @@ def _row(summary: dict[str, Any], run: str) -> dict[str, Any]:
         "policy": summary.get("policy") or "?",
         "split": summary.get("split") or "-",
         "asset_source": summary.get("asset_source") or "-",
+        "obs": (summary.get("meta") or {}).get("obs") or summary.get("obs") or "-",
         "episodes": int(summary.get("episodes") or 0),
         "successes": int(summary.get("successes") or 0),
         "success_rate": _get(summary, "success_rate"),
@@ -177,6 +179,7 @@ def leaderboard_markdown(frame: "Any", skipped: list[Path] | tuple[Path, ...] = 
         "policy",
         "split",
         "assets",
+        "obs",
         "success [95% CI]",
         "rot err deg (mean / median)",
         "trans err m (mean / median)",
@@ -189,6 +192,7 @@ def leaderboard_markdown(frame: "Any", skipped: list[Path] | tuple[Path, ...] = 
             f"`{row.policy}`",
             row.split,
             _short_source(row.asset_source),
+            row.obs,
             _success_cell(row),
             f"{_fmt(row.rot_err_deg_mean, 2)} / {_fmt(row.rot_err_deg_median, 2)}",
             f"{_fmt(row.trans_err_m_mean, 4)} / {_fmt(row.trans_err_m_median, 4)}",
@@ -214,7 +218,7 @@ def leaderboard_markdown(frame: "Any", skipped: list[Path] | tuple[Path, ...] = 
 
 def _bar_labels(frame: "Any") -> list[str]:
     """Policy names, plus split / asset source / run where needed to tell bars apart."""
-    varying = [key for key in ("split", "asset_source") if frame[key].nunique() > 1]
+    varying = [key for key in ("split", "asset_source", "obs") if frame[key].nunique() > 1]
     labels = []
     for row in frame.itertuples(index=False):
         extra = [_short_source(str(getattr(row, key))) for key in varying]
