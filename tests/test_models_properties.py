@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from models_helpers import MODEL_NAMES, scene, small_model
+from wpbench.data.augment import yaw_rotations
 from wpbench.geometry import se3
 from wpbench.models import build_model
 
@@ -92,6 +95,39 @@ def test_translation_equivariance(name, dynamic_graph, shift):
     goal = se3.apply(T, data["action"])
     goal_moved = se3.apply(T_moved, data["action"] + t)
     assert torch.allclose(goal_moved, goal + t, atol=1e-8)
+
+
+@pytest.mark.parametrize("name", MODEL_NAMES)
+@settings(max_examples=5, deadline=None)
+@given(yaw=st.floats(-math.pi, math.pi))
+def test_yaw_equivariance(name, yaw):
+    """Turning the whole scene by A about world z turns the prediction: T' = A T A^-1 (heading frame)."""
+    model = small_model(name)
+    data = scene(batch=1, dtype=torch.float64)
+    A = yaw_rotations(torch.tensor([yaw], dtype=torch.float64))
+    R = A[:, :3, :3]
+    with torch.no_grad():
+        T = model(data["action"], data["anchor"]).transform
+        T_turned = model(data["action"] @ R.transpose(1, 2), data["anchor"] @ R.transpose(1, 2)).transform
+    assert torch.allclose(T_turned, A @ T @ A.transpose(1, 2), atol=1e-9)
+
+
+def test_without_the_heading_frame_a_model_is_not_yaw_equivariant():
+    """The property above comes from the heading frame, not from the data or luck."""
+    from models_helpers import small_overrides
+
+    torch.manual_seed(0)
+    model = build_model("goalflow", **small_overrides("goalflow", heading_frame=False)).double().eval()
+    # Non-zero output layers, so the flow depends on the input frame at all.
+    for head in (model.flow_head, model.affine_head):
+        torch.nn.init.normal_(head[-1].weight, std=0.5)
+    data = scene(batch=1, dtype=torch.float64)
+    A = yaw_rotations(torch.tensor([1.0], dtype=torch.float64))
+    R = A[:, :3, :3]
+    with torch.no_grad():
+        T = model(data["action"], data["anchor"]).transform
+        T_turned = model(data["action"] @ R.transpose(1, 2), data["anchor"] @ R.transpose(1, 2)).transform
+    assert not torch.allclose(T_turned, A @ T @ A.transpose(1, 2), atol=1e-4)
 
 
 @pytest.mark.parametrize("dynamic_graph", [False, True])

@@ -68,6 +68,10 @@ class TaxPoseConfig:
 
     attention_layers/heads/ffn_mult: the cross-attention transformer (width = encoder emb_dim).
     head_hidden: hidden width of the per-point residual-flow + weight head.
+    heading_frame: run the network in the scene's heading frame
+        (``wpbench.models.heading_frame``): exact yaw equivariance.
+    learn_sharpness: learn a factor on the correspondence scores (softmax
+        temperature), so the soft correspondences can sharpen quickly.
     """
 
     encoder: DGCNNConfig = field(default_factory=DGCNNConfig)
@@ -75,6 +79,8 @@ class TaxPoseConfig:
     attention_heads: int = 4
     ffn_mult: int = 2
     head_hidden: int = 64
+    heading_frame: bool = True
+    learn_sharpness: bool = True
 
     def __post_init__(self) -> None:
         if self.encoder.emb_dim % self.attention_heads:
@@ -98,12 +104,18 @@ class GoalFlowConfig:
         WeightedPose: one per sample (the paper) or one per action point.
     position_scale: factor on the centred action xyz fed to the flow head
         (1 / typical object size in metres), so it sees unit-scale inputs.
+    heading_frame: run the network in the scene's heading frame
+        (``wpbench.models.heading_frame``): exact yaw equivariance.
+    affine_flow: add a per-sample affine flow ``M p + b`` (from the global
+        feature) to the per-point flow: a rigid motion's flow is exactly that.
     """
 
     encoder: DGCNNConfig = field(default_factory=DGCNNConfig)
     head_hidden: int = 64
     mixing_weight: MixingWeightMode = "per_sample"
     position_scale: float = 10.0
+    heading_frame: bool = True
+    affine_flow: bool = True
 
     def __post_init__(self) -> None:
         if self.mixing_weight not in ("per_sample", "per_point"):

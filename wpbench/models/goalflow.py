@@ -1,6 +1,7 @@
 """Goal Flow: a dense flow from each action point to its goal (FlowBot3D-style).
 
-One DGCNN runs over the whole scene, action ∪ anchor, with an extra
+The network runs in the heading frame (``heading_frame``), so the flow is
+exactly yaw-equivariant. One DGCNN runs over the whole scene, action ∪ anchor, with an extra
 "is action" channel, in a frame centred on the action centroid (so the flow
 is translation invariant and ``p + d`` translation equivariant). Per action
 point a head reads the point feature and the scene's max-pooled global
@@ -20,6 +21,7 @@ from torch import nn
 from wpbench.geometry.procrustes import weighted_procrustes
 from wpbench.models.configs import GoalFlowConfig
 from wpbench.models.dgcnn import DGCNN
+from wpbench.models.heading_frame import from_heading_frame, heading_rotation, to_heading_frame
 from wpbench.models.inputs import check_point_clouds
 from wpbench.models.mlp import head_mlp
 from wpbench.models.output import CrossPoseOutput
@@ -42,12 +44,25 @@ class GoalFlow(nn.Module):
         # in metres a 10 cm object gives inputs ~0.05, whose weights learn slowly (without the
         # scaling the one-sample overfit plateaued at ~1.5 cm mean point error, with it < 1 cm).
         self.flow_head = head_mlp(2 * dim + 3, self.config.head_hidden, 3)
+        # The flow of a rigid motion is affine in the point, (R - I) p + t. This head reads the
+        # global feature and predicts that affine map (a 3x3 matrix and a vector) for the whole
+        # action object; the per-point head above adds what is not affine. Without it the
+        # per-point MLP must multiply global features by coordinates itself, which it learns slowly.
+        self.affine_head = head_mlp(dim, self.config.head_hidden, 12) if self.config.affine_flow else None
         mixing_inputs = dim if self.config.mixing_weight == "per_sample" else 2 * dim + 3
         self.mixing_head = head_mlp(mixing_inputs, self.config.head_hidden, 1)
 
     def flow_terms(self, action: torch.Tensor, anchor: torch.Tensor) -> dict[str, torch.Tensor]:
-        """``flow`` (B, NA, 3) and mixing weight ``w`` (B,) or (B, NA) in (0, 1)."""
+        """``flow`` (B, NA, 3) (world frame) and mixing weight ``w`` (B,) or (B, NA) in (0, 1)."""
         check_point_clouds(action, anchor)
+        if not self.config.heading_frame:
+            return self._flow_terms_in_frame(action, anchor)
+        rotation = heading_rotation(action, anchor)
+        terms = self._flow_terms_in_frame(to_heading_frame(rotation, action), to_heading_frame(rotation, anchor))
+        terms["flow"] = from_heading_frame(rotation, terms["flow"])
+        return terms
+
+    def _flow_terms_in_frame(self, action: torch.Tensor, anchor: torch.Tensor) -> dict[str, torch.Tensor]:
         batch, action_points, _ = action.shape
         if action_points + anchor.shape[1] < self.config.encoder.k:
             raise ValueError(f"the scene needs at least k={self.config.encoder.k} points")
@@ -66,6 +81,10 @@ class GoalFlow(nn.Module):
             dim=-1,
         )
         flow = self.flow_head(action_features)
+        if self.affine_head is not None:
+            affine = self.affine_head(global_feature)  # (B, 12)
+            matrix, offset = affine[:, :9].view(batch, 3, 3), affine[:, 9:]
+            flow = flow + scene[:, :action_points] @ matrix.transpose(1, 2) + offset.unsqueeze(1)
         if self.config.mixing_weight == "per_sample":
             w = torch.sigmoid(self.mixing_head(global_feature)).squeeze(-1)  # (B,)
         else:

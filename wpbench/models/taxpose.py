@@ -1,6 +1,7 @@
 """TAX-Pose: cross-pose from soft cross-object correspondences and a weighted SVD.
 
-Per object a DGCNN embeds the cloud centred on its own centroid (so features
+The network runs in the heading frame (``heading_frame``), so its
+correspondences are exactly yaw-equivariant. Per object a DGCNN embeds the cloud centred on its own centroid (so features
 are translation invariant); cross-attention lets each object's points read
 the other's. Scores ``s_ij = <phi_i, psi_j> / sqrt(D)`` give
 
@@ -24,6 +25,7 @@ from wpbench.geometry.procrustes import dual_flow_svd
 from wpbench.models.attention import BidirectionalCrossAttention
 from wpbench.models.configs import TaxPoseConfig
 from wpbench.models.dgcnn import DGCNN
+from wpbench.models.heading_frame import from_heading_frame, heading_rotation, to_heading_frame
 from wpbench.models.inputs import check_point_clouds
 from wpbench.models.mlp import head_mlp
 from wpbench.models.output import CrossPoseOutput
@@ -48,15 +50,30 @@ class TaxPose(nn.Module):
         # 3 residual-flow channels + 1 weight logit per point.
         self.action_head = head_mlp(dim, self.config.head_hidden, 4)
         self.anchor_head = head_mlp(dim, self.config.head_hidden, 4)
+        # Log of a learned factor on the correspondence scores. The scores of normalised
+        # features start near N(0, 1): every soft target is then close to the other cloud's
+        # centroid, and sharpening through the features alone is slow to learn.
+        self.log_sharpness = nn.Parameter(torch.zeros(())) if self.config.learn_sharpness else None
 
     def correspondence_terms(self, action: torch.Tensor, anchor: torch.Tensor) -> dict[str, torch.Tensor]:
-        """The dual-flow SVD inputs: action_targets, action_weights, anchor_sources, anchor_weights."""
+        """The dual-flow SVD inputs (world frame): action_targets, action_weights, anchor_sources, anchor_weights."""
         check_point_clouds(action, anchor, min_points=self.config.encoder.k)
+        if not self.config.heading_frame:
+            return self._correspondence_terms_in_frame(action, anchor)
+        rotation = heading_rotation(action, anchor)
+        terms = self._correspondence_terms_in_frame(to_heading_frame(rotation, action), to_heading_frame(rotation, anchor))
+        for key in ("action_targets", "anchor_sources"):
+            terms[key] = from_heading_frame(rotation, terms[key])
+        return terms
+
+    def _correspondence_terms_in_frame(self, action: torch.Tensor, anchor: torch.Tensor) -> dict[str, torch.Tensor]:
         action_features = self.action_encoder(action - action.mean(dim=1, keepdim=True))
         anchor_features = self.anchor_encoder(anchor - anchor.mean(dim=1, keepdim=True))
         action_features, anchor_features = self.cross_attention(action_features, anchor_features)
 
         scores = action_features @ anchor_features.transpose(1, 2) / math.sqrt(action_features.shape[-1])
+        if self.log_sharpness is not None:
+            scores = scores * self.log_sharpness.exp()
         soft_targets = torch.softmax(scores, dim=2) @ anchor  # (B, NA, 3) in the world frame
         soft_sources = torch.softmax(scores, dim=1).transpose(1, 2) @ action  # (B, NB, 3)
 
