@@ -12,6 +12,9 @@ TASK        ?= open-then-place
 SPLIT       ?= val
 EPISODES    ?= 20
 RUN_ARGS    ?=
+# `make run` writes to its own folder (git-ignored), so it really runs its episodes even
+# though the published runs under results/runs/ are committed; rerunning it resumes.
+RUN_OUT     ?= runs/$(POLICY)__$(TASK)__$(SPLIT)
 RESULTS     ?= results
 PYTEST_ARGS ?=
 
@@ -20,7 +23,7 @@ export WPBENCH_VENV := $(abspath $(VENV))
 .PHONY: help setup run test bench leaderboard
 
 help:
-	@echo "make run          set up, then evaluate POLICY=$(POLICY) on TASK=$(TASK) (SPLIT=$(SPLIT), EPISODES=$(EPISODES))"
+	@echo "make run          set up, then evaluate POLICY=$(POLICY) on TASK=$(TASK) (SPLIT=$(SPLIT), EPISODES=$(EPISODES)) into $(RUN_OUT)"
 	@echo "make test         set up, then run the test suite"
 	@echo "make bench        set up, then print the speed benchmarks"
 	@echo "make leaderboard  rebuild $(RESULTS)/leaderboard.{md,csv,png} from every summary.json"
@@ -30,8 +33,8 @@ setup:
 	@bash scripts/setup.sh
 
 run: setup
-	$(WPBENCH) run --policy $(POLICY) --task $(TASK) --split $(SPLIT) --episodes $(EPISODES) --resume $(RUN_ARGS)
-	$(WPBENCH) leaderboard --results $(RESULTS) --quiet
+	$(WPBENCH) run --policy $(POLICY) --task $(TASK) --split $(SPLIT) --episodes $(EPISODES) \
+		--out $(RUN_OUT) --resume $(RUN_ARGS)
 
 # pytest exits with 5 when it collected no tests: that is a failure here too.
 test: setup

@@ -1,20 +1,26 @@
 #!/usr/bin/env bash
-# Reference runs of issue 3: gt and identity on every task, val split, built-in and
-# real PartNet-Mobility assets, both observation modes. Resumable (--resume).
+# Evaluation runs behind results/: every policy in POLICIES on every task, val split,
+# built-in furniture and (when present) the real PartNet-Mobility objects, in each
+# observation mode of OBS. Resumable (--resume): rerun it after an interruption.
+#   scripts/reference_runs.sh                                   # gt and identity (issue 3's bounds)
+#   POLICIES="gf tp oracle" OBS=camera EPISODES=50 PARTNET_EPISODES=20 scripts/reference_runs.sh
 set -uo pipefail  # a failed run is reported in the log; the others still run
 cd "$(dirname "$0")/.."
+POLICIES="${POLICIES:-gt identity}"
 EPISODES="${EPISODES:-50}"
 PARTNET="${PARTNET:-../shared/partnet-mobility}"
+PARTNET_EPISODES="${PARTNET_EPISODES:-$EPISODES}"
+TASKS="${TASKS:-open-door place-in open-then-place}"
 for obs in ${OBS:-camera mesh}; do
-  for task in open-door place-in open-then-place; do
-    for policy in gt identity; do
+  for task in $TASKS; do
+    for policy in $POLICIES; do
       .venv/bin/wpbench run --policy "$policy" --task "$task" --split val --episodes "$EPISODES" \
         --obs "$obs" --resume --no-progress
-      if [ -d "$PARTNET" ]; then
-        .venv/bin/wpbench run --policy "$policy" --task "$task" --episodes "$EPISODES" \
+      if [ -d "$PARTNET" ] && [ "$PARTNET_EPISODES" -gt 0 ]; then
+        .venv/bin/wpbench run --policy "$policy" --task "$task" --episodes "$PARTNET_EPISODES" \
           --obs "$obs" --assets "$PARTNET" --resume --no-progress
       fi
     done
   done
 done
-.venv/bin/wpbench leaderboard
+.venv/bin/wpbench leaderboard --quiet

@@ -282,3 +282,24 @@ def test_cli_show_renders_closed_and_open(tmp_path):
     closed, opened = image[24:, :160], image[24:, 160:]
     assert closed.std() > 10 and opened.std() > 10  # something was drawn
     assert np.abs(closed - opened).mean() > 3  # the door moved between the two views
+
+
+@pytest.mark.parametrize("front", [(1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.6, -0.8, 0.0)])
+def test_render_camera_looks_at_the_front_whatever_way_it_faces(front):
+    """PartNet-Mobility doors face -x: the camera must follow ``asset.front``, not assume +x."""
+    from wpbench.assets.render import RenderConfig, camera_direction
+
+    config = RenderConfig(azimuth_deg=35.0, elevation_deg=25.0)
+    direction = camera_direction(front, config)
+    assert np.linalg.norm(direction) == pytest.approx(1.0)
+    horizontal = direction[:2] / np.linalg.norm(direction[:2])
+    cos_to_front = float(horizontal @ np.asarray(front[:2]) / np.linalg.norm(front[:2]))
+    assert cos_to_front == pytest.approx(np.cos(np.radians(35.0)))
+    assert direction[2] == pytest.approx(np.sin(np.radians(25.0)))
+
+
+def test_render_camera_rejects_a_vertical_front():
+    from wpbench.assets.render import camera_direction
+
+    with pytest.raises(ValueError, match="horizontal direction"):
+        camera_direction((0.0, 0.0, 1.0))

@@ -1,7 +1,8 @@
 """Render a furniture asset closed and open, side by side, with a SAPIEN camera.
 
 Needs SAPIEN's Vulkan renderer (Mesa lavapipe on CPU machines). The camera looks at
-the object's front (+x in the body frame) from the front-right and a little above, so
+the object's front (``asset.front``: +x for the built-in furniture, whatever way the
+door faces for a PartNet-Mobility object) from the front-right and a little above, so
 the door, its handle and the cavity behind it are visible; the in-region is drawn as
 a translucent green box in the open view.
 """
@@ -21,7 +22,7 @@ class RenderConfig:
     width: int = 480
     height: int = 480
     fovy_deg: float = 40.0
-    azimuth_deg: float = 35.0  # camera direction from the +x (front) axis, towards +y
+    azimuth_deg: float = 35.0  # camera direction from the asset's front, turned towards its left
     elevation_deg: float = 25.0
     distance_factor: float = 3.4  # camera distance / object bounding-sphere radius
     show_in_region: bool = True
@@ -38,6 +39,17 @@ def look_at(eye: np.ndarray, target: np.ndarray, up=(0.0, 0.0, 1.0)) -> np.ndarr
     pose[:3, :3] = np.stack([forward, left, true_up], axis=1)
     pose[:3, 3] = eye
     return pose
+
+
+def camera_direction(front, config: RenderConfig = RenderConfig()) -> np.ndarray:
+    """Unit vector from the object's centre to the camera: ``config.azimuth_deg`` away from
+    the asset's ``front`` (body frame, horizontal part used), ``config.elevation_deg`` above."""
+    front = np.asarray(front, float)
+    if not np.all(np.isfinite(front)) or np.hypot(front[0], front[1]) < 1e-9:
+        raise ValueError(f"asset front must have a horizontal direction, got {front.tolist()}")
+    az = np.arctan2(front[1], front[0]) + np.deg2rad(config.azimuth_deg)
+    el = np.deg2rad(config.elevation_deg)
+    return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
 
 
 def render_states(asset: FurnitureAsset, qpos_values: list[float], config: RenderConfig = RenderConfig()) -> list[np.ndarray]:
@@ -67,16 +79,20 @@ def render_states(asset: FurnitureAsset, qpos_values: list[float], config: Rende
     low, high = np.asarray(asset.bounds_low, float), np.asarray(asset.bounds_high, float)
     centre = (low + high) / 2 + np.array([0.0, 0.0, lift])
     radius = float(np.linalg.norm(high - low)) / 2
-    az, el = np.deg2rad(config.azimuth_deg), np.deg2rad(config.elevation_deg)
-    direction = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
-    eye = centre + direction * radius * config.distance_factor
+    eye = centre + camera_direction(asset.front, config) * radius * config.distance_factor
     camera = scene.add_camera("viewer", config.width, config.height, np.deg2rad(config.fovy_deg), 0.02, 50.0)
     camera.entity.set_pose(sapien.Pose(look_at(eye, centre)))
 
+    # Other joints rest closed: at the value the asset records (PartNet objects), else the
+    # limit nearest 0, as in the simulator (wpbench.sim.furniture).
+    limits = np.array([j.get_limits()[0] for j in art.get_active_joints()], dtype=float)
+    rest = np.clip(np.zeros(len(names)), limits[:, 0], limits[:, 1])
+    for i, name in enumerate(names):
+        rest[i] = float(asset.extra.get("closed_qpos_by_joint", {}).get(name, rest[i]))
     region_entity = None
     images = []
     for q in qpos_values:
-        qpos = np.zeros(len(names))
+        qpos = rest.copy()
         qpos[index] = q
         art.set_qpos(qpos)
         show_region = config.show_in_region and np.isclose(q, asset.open_qpos)
@@ -99,10 +115,11 @@ def _add_region_box(scene, asset: FurnitureAsset, lift: float):
     rotation = np.asarray(box.rotation, float)
     pose = np.eye(4)
     pose[:3, :3] = rotation
-    pose[:3, 3] = np.asarray(box.center, float) * asset.scale + np.array([0.0, 0.0, lift])
+    # The in-region is stored in the scaled body frame (as the simulator uses it): no asset.scale here.
+    pose[:3, 3] = np.asarray(box.center, float) + np.array([0.0, 0.0, lift])
     builder = scene.create_actor_builder()
     material = sapien.render.RenderMaterial(base_color=[0.1, 0.9, 0.2, 0.35])
-    builder.add_box_visual(half_size=list(np.asarray(box.half_extents) * asset.scale), material=material)
+    builder.add_box_visual(half_size=list(np.asarray(box.half_extents, float)), material=material)
     entity = builder.build_kinematic(name="in_region")
     entity.set_pose(sapien.Pose(pose))
     return entity
