@@ -220,3 +220,29 @@ def test_choice_callback_calls_the_registry_only_when_needed():
     assert callback("val") == "val" and calls == [1]
     with pytest.raises(typer.BadParameter, match="unknown split 'train'; valid: test, val"):
         callback("train")
+
+
+@pytest.mark.slow
+def test_run_writes_results_resumes_and_never_overwrites(wpbench_exe, tmp_path):
+    """`wpbench run` as a user runs it: files, summary table, --resume, and a refusal to clobber."""
+    import json
+
+    out = tmp_path / "run"
+    common = ("run", "--policy", "gt", "--task", "open-door", "--obs", "mesh", "--out", str(out), "--no-progress")
+    first = run_wpbench(wpbench_exe, *common, "--episodes", "2", timeout=600)
+    assert first.returncode == 0, first.stderr
+    assert "success" in first.stdout.lower()
+    lines = (out / "episodes.jsonl").read_text().splitlines()
+    assert [json.loads(line)["episode"] for line in lines] == [0, 1]
+    assert all(json.loads(line)["success"] for line in lines)
+    assert json.loads((out / "summary.json").read_text())["success_rate"] == 1.0
+
+    refused = run_wpbench(wpbench_exe, *common, "--episodes", "3", timeout=600)
+    assert refused.returncode != 0 and "--resume" in (refused.stderr + refused.stdout)
+    assert (out / "episodes.jsonl").read_text().splitlines() == lines  # nothing written was lost
+
+    resumed = run_wpbench(wpbench_exe, *common, "--episodes", "3", "--resume", timeout=600)
+    assert resumed.returncode == 0, resumed.stderr
+    after = (out / "episodes.jsonl").read_text().splitlines()
+    assert after[:2] == lines and len(after) == 3
+    assert json.loads((out / "summary.json").read_text())["episodes"] == 3
