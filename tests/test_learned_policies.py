@@ -100,3 +100,28 @@ def test_corrupt_weights_give_a_clear_error(tmp_path, weights_root, victim, cont
     (tmp_path / "gf" / victim).write_bytes(content)
     with pytest.raises(ValueError, match=r"corrupt.*wpbench train --policy gf"):
         LearnedPolicy(policy="gf", weights_root=tmp_path)
+
+
+SHIPPED = ("gf", "tp", "oracle", "wp-og", "wp-postsvd", "wp-postsvd-t", "wp")
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_weights_load_and_answer(name):
+    """The weights committed under policies/weights/ fit today's model code (no retraining needed)."""
+    policy = make_policy(name)
+    out = policy.predict(_obs(kind=1), info={"kind": 1})
+    _assert_rigid(out.transform)
+    if name.startswith("wp"):
+        assert 0.0 < float(np.mean(out.diagnostics["w"])) < 1.0
+
+
+def test_shipped_weights_say_how_they_were_made():
+    from policies.learned import WEIGHTS_ROOT
+
+    best = json.loads((WEIGHTS_ROOT / "best.json").read_text())
+    assert best["policy"] in ("wp-og", "wp-postsvd", "wp-postsvd-t")
+    for name in ("gf", "tp", "wp-og", "wp-postsvd", "wp-postsvd-t"):
+        config = json.loads((WEIGHTS_ROOT / name / "config.json").read_text())
+        metrics = json.loads((WEIGHTS_ROOT / name / "metrics.json").read_text())
+        assert config["policy"] == name and config["train_config"]["minutes"] <= 60
+        assert metrics["val"] and metrics["peak_rss_mib"] < 8 * 1024

@@ -33,3 +33,15 @@ def test_missing_weights_give_a_table_that_says_so(tmp_path: Path, monkeypatch):
     cfg = PaperTableConfig(data=tmp_path, policies=("no-such-policy",), run_missing=False, results=tmp_path)
     out = make_paper_table(cfg)
     assert "no-such-policy | no weights" in out.read_text()
+
+
+def test_category_rows_show_each_category_of_each_kind():
+    cfg = PaperTableConfig(policies=("gf",))
+    by_category = {"gf": {"articulated": {"oven": {"rot_deg": 2.5, "trans_m": 0.031, "point_m": 0.03, "n": 5},
+                                          "fridge": {"rot_deg": 30.0, "trans_m": 0.2, "point_m": 0.2, "n": 5}},
+                          "free-floating": {"oven": {"rot_deg": 9.0, "trans_m": 0.05, "point_m": 0.05, "n": 5}}}}
+    text = render(cfg, {}, {}, by_category)
+    header = next(line for line in text.splitlines() if line.startswith("| policy | kind |"))
+    assert [c.strip() for c in header.strip("|").split("|")] == ["policy", "kind", "fridge", "oven"]
+    assert "| gf | articulated | 30.0 / 20.0 | 2.5 / 3.1 |" in text
+    assert "| gf | free-floating | - | 9.0 / 5.0 |" in text

@@ -93,3 +93,24 @@ def test_weighted_pose_starts_from_gf_and_tp_and_writes_best_json(data_root):
     assert set(described["init"]["from"]) == {"gf", "tp"}
     best = json.loads((data_root / "weights" / "best.json").read_text())
     assert best["policy"] == "wp-postsvd-t" and "wp-postsvd-t" in best["candidates"]
+
+
+def test_errors_by_category_partition_the_samples(tmp_path):
+    """Per-category statistics cover every sample once and agree with the overall ones."""
+    import torch
+
+    from wpbench.data.dataset import CrossPoseDataset
+    from wpbench.data.synthetic import write_synthetic_split
+    from wpbench.models import build_model
+    from wpbench.training.evaluate import evaluate, evaluate_by_category
+
+    write_synthetic_split(tmp_path, "val", per_kind=6, num_action_points=32, num_anchor_points=48)
+    dataset = CrossPoseDataset(tmp_path / "val", kinds=("articulated",))
+    dataset.categories = ["oven", "fridge"] * (len(dataset) // 2)
+    torch.manual_seed(0)
+    model = build_model("goalflow", encoder={"k": 4, "edge_channels": [8, 8], "emb_dim": 16, "groups": 4}, head_hidden=16)
+    per = evaluate_by_category(model, dataset, "articulated", 24, 40)
+    overall = evaluate(model, dataset, ("articulated",), len(dataset), 24, 40)["articulated"]
+    assert sorted(per) == ["fridge", "oven"] and sum(v["n"] for v in per.values()) == overall["n"] == 6
+    pooled = sum(v["rot_deg"] * v["n"] for v in per.values()) / overall["n"]
+    assert pooled == pytest.approx(overall["rot_deg"], rel=1e-9)

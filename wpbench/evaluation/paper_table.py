@@ -6,7 +6,8 @@ Two tables, one command (``wpbench paper-table``):
 1. Pose errors on the generated data set (no simulation): for each policy, the
    train and val splits, free-floating and articulated samples, mean rotation
    error (deg), translation error (cm) and per-point error (cm).
-2. Simulated success rate (95% Wilson interval) of each policy on every task,
+2. Val pose errors by furniture category, per kind.
+3. Simulated success rate (95% Wilson interval) of each policy on every task,
    val split, built-in furniture: read from ``results/runs/<policy>__<task>__val__procedural__<obs>``
    and, with ``run_missing``, run there first.
 """
@@ -34,13 +35,21 @@ class PaperTableConfig:
     policies: tuple[str, ...] = POLICIES
 
 
-def _models_for(policy: str):
-    """{kind: torch model} answering each kind for ``policy`` (the oracle routes by kind)."""
+def _models_for(policy: str) -> dict[str, tuple]:
+    """{kind: (torch model, action points, anchor points)} answering each kind for ``policy``.
+
+    The point counts are those the model was trained with (the learned policies subsample
+    their observations to them too); the oracle routes each kind to its specialist.
+    """
     from policies.learned import LearnedPolicy
 
+    def loaded(name: str) -> tuple:
+        learned = LearnedPolicy(policy=name)
+        return learned.model, learned.num_action_points, learned.num_anchor_points
+
     if policy == "oracle":
-        return {"articulated": LearnedPolicy(policy="gf").model, "free-floating": LearnedPolicy(policy="tp").model}
-    model = LearnedPolicy(policy=policy).model
+        return {"articulated": loaded("gf"), "free-floating": loaded("tp")}
+    model = loaded(policy)
     return {kind: model for kind in KINDS}
 
 
@@ -54,10 +63,23 @@ def pose_errors(cfg: PaperTableConfig, policy: str) -> dict[tuple[str, str], dic
     for split in SPLITS:
         directory = Path(cfg.data) / split
         for kind in KINDS:
+            model, num_action, num_anchor = models[kind]
             dataset = CrossPoseDataset(directory, kinds=(kind,))
-            result = evaluate(models[kind], dataset, (kind,), cfg.samples_per_kind, dataset.action.shape[1],
-                              dataset.anchor.shape[1])
-            out[(split, kind)] = result[kind]
+            out[(split, kind)] = evaluate(model, dataset, (kind,), cfg.samples_per_kind, num_action, num_anchor)[kind]
+    return out
+
+
+def category_errors(cfg: PaperTableConfig, policy: str) -> dict[str, dict[str, dict[str, float]]]:
+    """{kind: {category: errors}} on every val sample: where a policy fails, not only how much."""
+    from wpbench.data.dataset import CrossPoseDataset
+    from wpbench.training.evaluate import evaluate_by_category
+
+    models = _models_for(policy)
+    out = {}
+    for kind in KINDS:
+        model, num_action, num_anchor = models[kind]
+        dataset = CrossPoseDataset(Path(cfg.data) / "val", kinds=(kind,))
+        out[kind] = evaluate_by_category(model, dataset, kind, num_action, num_anchor)
     return out
 
 
@@ -87,7 +109,8 @@ def _fmt(value: float, scale: float = 1.0, digits: int = 1) -> str:
     return "n/a" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value * scale:.{digits}f}"
 
 
-def render(cfg: PaperTableConfig, errors: dict, successes: dict) -> str:
+def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: dict | None = None) -> str:
+    by_category = by_category or {}
     lines = ["# WeightedPose, paper Table 1 layout (wpbench)", "",
              "Made by `wpbench paper-table`. Pose errors are on the generated data set "
              f"(`{cfg.data}`, up to {cfg.samples_per_kind} samples per split and kind, camera point clouds); "
@@ -106,6 +129,17 @@ def render(cfg: PaperTableConfig, errors: dict, successes: dict) -> str:
                 e = errors[policy][(split, kind)]
                 cells.append(f"{_fmt(e['rot_deg'])} / {_fmt(e['trans_m'], 100)} / {_fmt(e['point_m'], 100)}")
         lines.append(f"| {policy} | " + " | ".join(cells) + " |")
+    lines += ["", "## Val pose errors by furniture category (rotation deg / translation cm)", "",
+              "Every val sample of the kind the policy is asked about; the rows show where a policy fails.", ""]
+    categories = sorted({c for per_kind in by_category.values() for kinds in per_kind.values() for c in kinds})
+    lines += ["| policy | kind | " + " | ".join(categories) + " |", "|" + "---|" * (2 + len(categories))]
+    for policy in cfg.policies:
+        for kind in KINDS:
+            per = by_category.get(policy, {}).get(kind)
+            if per is None:
+                continue
+            cells = [f"{_fmt(per[c]['rot_deg'])} / {_fmt(per[c]['trans_m'], 100)}" if c in per else "-" for c in categories]
+            lines.append(f"| {policy} | {kind} | " + " | ".join(cells) + " |")
     lines += ["", f"## Simulated success rate (val split, {cfg.obs})", "",
               "| policy | " + " | ".join(TASKS) + " |", "|" + "---|" * (1 + len(TASKS))]
     for policy in cfg.policies:
@@ -122,10 +156,11 @@ def render(cfg: PaperTableConfig, errors: dict, successes: dict) -> str:
 
 
 def make_paper_table(cfg: PaperTableConfig, out: Path | None = None) -> Path:
-    errors, successes = {}, {}
+    errors, successes, by_category = {}, {}, {}
     for policy in cfg.policies:
         try:
             errors[policy] = pose_errors(cfg, policy)
+            by_category[policy] = category_errors(cfg, policy)
         except (FileNotFoundError, ValueError) as err:
             print(f"{policy}: no pose errors ({err})")
             continue
@@ -135,5 +170,5 @@ def make_paper_table(cfg: PaperTableConfig, out: Path | None = None) -> Path:
                 successes[(policy, task)] = summary
     out = Path(out) if out is not None else Path(cfg.results) / "paper-table.md"
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(render(cfg, errors, successes))
+    out.write_text(render(cfg, errors, successes, by_category))
     return out

@@ -19,6 +19,43 @@ from wpbench.training.batches import make_batch, subsample_points
 
 
 @torch.no_grad()
+def per_sample_errors(
+    model: torch.nn.Module,
+    dataset: CrossPoseDataset,
+    indices: torch.Tensor,
+    num_action: int,
+    num_anchor: int,
+    batch_size: int = 16,
+    seed: int = 0,
+) -> dict[str, torch.Tensor]:
+    """Errors of each sample ``indices`` of ``dataset``: {"rot_deg", "trans_m", "point_m"[, "w"]}, each (len(indices),).
+
+    The clouds are subsampled to the model's point counts with a fixed seed. NaN predictions give NaN errors.
+    """
+    was_training = model.training
+    model.eval()
+    generator = torch.Generator().manual_seed(seed)
+    columns: dict[str, list[torch.Tensor]] = {"rot_deg": [], "trans_m": [], "point_m": [], "w": []}
+    try:
+        for start in range(0, len(indices), batch_size):
+            batch = make_batch(dataset, indices[start:start + batch_size])
+            action = subsample_points(batch["action"], num_action, generator)
+            anchor = subsample_points(batch["anchor"], num_anchor, generator)
+            output = model(action, anchor)
+            T_pred = output.transform.double()
+            if "w" in output.diagnostics:
+                columns["w"].append(output.diagnostics["w"].reshape(len(T_pred), -1).mean(dim=1).double())
+            T_gt = batch["gt_transform"].double()
+            pts = action.double()
+            columns["rot_deg"].append(metrics.rotation_error_deg(T_pred[:, :3, :3], T_gt[:, :3, :3]))
+            columns["trans_m"].append(metrics.translation_error(T_pred, T_gt, pts.mean(dim=1)))
+            columns["point_m"].append(metrics.point_error(T_pred, T_gt, pts)[0])
+    finally:
+        model.train(was_training)
+    empty = torch.zeros(0, dtype=torch.float64)
+    return {key: torch.cat(values) if values else empty for key, values in columns.items() if values or key != "w"}
+
+
 def evaluate(
     model: torch.nn.Module,
     dataset: CrossPoseDataset,
@@ -34,45 +71,46 @@ def evaluate(
 
     Means are over finite predictions; ``failures`` counts samples whose prediction was NaN.
     """
-    was_training = model.training
-    model.eval()
-    generator = torch.Generator().manual_seed(seed)
+    generator_seed = seed
     results: dict[str, dict[str, float]] = {}
-    try:
-        for kind in kinds:
-            idx = torch.nonzero(dataset.kind == KIND_CODE[kind]).flatten()
-            if len(idx) > per_kind:  # spread over the whole split (consecutive samples share furniture)
-                idx = idx[torch.linspace(0, len(idx) - 1, per_kind).round().long()]
-            rot, trans, point, w = [], [], [], []
-            for start in range(0, len(idx), batch_size):
-                batch = make_batch(dataset, idx[start:start + batch_size])
-                action = subsample_points(batch["action"], num_action, generator)
-                anchor = subsample_points(batch["anchor"], num_anchor, generator)
-                output = model(action, anchor)
-                T_pred = output.transform.double()
-                if "w" in output.diagnostics:
-                    w.append(output.diagnostics["w"].reshape(len(T_pred), -1).mean(dim=1).double())
-                T_gt = batch["gt_transform"].double()
-                pts = action.double()
-                rot.append(metrics.rotation_error_deg(T_pred[:, :3, :3], T_gt[:, :3, :3]))
-                trans.append(metrics.translation_error(T_pred, T_gt, pts.mean(dim=1)))
-                point.append(metrics.point_error(T_pred, T_gt, pts)[0])
-            results[kind] = _summarise(rot, trans, point)
-            if w:
-                results[kind]["w"] = float(torch.cat(w).mean())
-    finally:
-        model.train(was_training)
+    for kind in kinds:
+        idx = torch.nonzero(dataset.kind == KIND_CODE[kind]).flatten()
+        if len(idx) > per_kind:  # spread over the whole split (consecutive samples share furniture)
+            idx = idx[torch.linspace(0, len(idx) - 1, per_kind).round().long()]
+        errors = per_sample_errors(model, dataset, idx, num_action, num_anchor, batch_size, generator_seed)
+        results[kind] = _summarise(errors)
     return results
 
 
-def _summarise(rot: list[torch.Tensor], trans: list[torch.Tensor], point: list[torch.Tensor]) -> dict[str, float]:
-    if not rot:
+def evaluate_by_category(
+    model: torch.nn.Module,
+    dataset: CrossPoseDataset,
+    kind: str,
+    num_action: int,
+    num_anchor: int,
+    seed: int = 0,
+) -> dict[str, dict[str, float]]:
+    """{category: the ``evaluate`` statistics} over every sample of ``kind`` in ``dataset``."""
+    idx = torch.nonzero(dataset.kind == KIND_CODE[kind]).flatten()
+    errors = per_sample_errors(model, dataset, idx, num_action, num_anchor, seed=seed)
+    categories = [dataset.categories[i] for i in idx.tolist()]
+    out = {}
+    for category in sorted(set(categories)):
+        mask = torch.tensor([c == category for c in categories])
+        out[category] = _summarise({key: value[mask] for key, value in errors.items()})
+    return out
+
+
+def _summarise(errors: dict[str, torch.Tensor]) -> dict[str, float]:
+    r, t, p = errors["rot_deg"], errors["trans_m"], errors["point_m"]
+    if len(r) == 0:
         return {"rot_deg": math.nan, "trans_m": math.nan, "point_m": math.nan, "failures": 0, "n": 0}
-    r, t, p = torch.cat(rot), torch.cat(trans), torch.cat(point)
     ok = torch.isfinite(r) & torch.isfinite(t) & torch.isfinite(p)
     mean = lambda x: float(x[ok].mean()) if ok.any() else math.nan  # noqa: E731
-    return {"rot_deg": mean(r), "trans_m": mean(t), "point_m": mean(p),
-            "failures": int((~ok).sum()), "n": int(len(r))}
+    out = {"rot_deg": mean(r), "trans_m": mean(t), "point_m": mean(p), "failures": int((~ok).sum()), "n": int(len(r))}
+    if "w" in errors and len(errors["w"]):
+        out["w"] = float(errors["w"].mean())
+    return out
 
 
 def mean_point_error(results: dict[str, dict[str, float]]) -> float:
