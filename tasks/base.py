@@ -80,6 +80,7 @@ class CrossPoseEnv(BaseEnv):
         num_anchor_points: int = 1024,
         camera_resolution: int = 256,
         render_backend: str | None = None,
+        extra_train_instances: int = 0,
         robot_uids=None,
         **kwargs,
     ):
@@ -89,7 +90,9 @@ class CrossPoseEnv(BaseEnv):
         from wpbench.assets.ravens import get_ravens_object
 
         self.observation_source = obs_mode
-        self.assets = load_library(assets, split=split)
+        # Extra procedural training furniture (training data only; the val split is unchanged).
+        extra = int(extra_train_instances) if assets == "procedural" else 0
+        self.assets = load_library(assets, split=split, extra_train=extra)
         if not self.assets:
             raise ValueError(f"no furniture found for assets={assets!r} split={split!r}")
         self.ravens = [get_ravens_object(name) for name in objects]

@@ -120,6 +120,20 @@ def test_an_instance_does_not_depend_on_library_size(tmp_path):
     assert alone.urdf.read_bytes() == in_library.urdf.read_bytes()
 
 
+def test_extra_train_instances_keep_the_val_split_and_its_files(tmp_path):
+    """Training furniture can grow without ever touching (or training on) the val instances."""
+    base = generate_library(tmp_path / "base", per_category=4, val_per_category=1, seed=3, categories=["safe"])
+    grown = generate_library(tmp_path / "grown", per_category=4, val_per_category=1, seed=3, categories=["safe"],
+                             extra_train=3)
+    base_split = json.loads((tmp_path / "base" / "split.json").read_text())
+    grown_split = json.loads((tmp_path / "grown" / "split.json").read_text())
+    assert grown_split["val"] == base_split["val"] == ["safe-0003"]
+    assert grown_split["train"] == base_split["train"] + ["safe-0004", "safe-0005", "safe-0006"]
+    assert grown_split["extra_train"] == 3
+    for a, b in zip(base, grown):
+        assert a.object_id == b.object_id and a.urdf.read_bytes() == b.urdf.read_bytes()
+
+
 # ---------------------------------------------------------------- geometry invariants
 def _door_transform(joint, q: float) -> np.ndarray:
     """4x4 body-frame motion of a child link's points when its joint goes from 0 to q."""

@@ -130,3 +130,13 @@ def test_symmetric_target_is_an_equivalent_pose_with_the_least_rotation():
         S = np.linalg.inv(T @ O) @ best @ O
         assert np.any([np.allclose(S[:3, :3], c, atol=1e-9) for c in cube])
         np.testing.assert_allclose(S[:3, 3], 0, atol=1e-9)
+
+
+def test_extra_train_instances_change_the_fingerprint_only_when_used():
+    from wpbench.data.config import GenerationConfig
+
+    plain = GenerationConfig(split="train")
+    assert GenerationConfig(split="train", extra_train_instances=0).sample_fingerprint() == plain.sample_fingerprint()
+    assert GenerationConfig(split="train", extra_train_instances=48).sample_fingerprint() != plain.sample_fingerprint()
+    with pytest.raises(ValueError, match="extra_train_instances"):
+        GenerationConfig(split="train", extra_train_instances=-1)

@@ -36,23 +36,27 @@ def default_val_per_category(per_category: int) -> int:
     return 0 if per_category < 2 else max(1, per_category // 4)
 
 
-def procedural_library(seed: int = 0, per_category: int = 16, cache_dir: Path | None = None) -> Path:
+def procedural_library(seed: int = 0, per_category: int = 16, cache_dir: Path | None = None,
+                       extra_train: int = 0) -> Path:
     """Folder of the procedural library for (seed, per_category), generating it on first use.
 
     ``cache_dir`` replaces ``cache_root()``; the library goes to
-    ``<cache>/procedural/seed-<seed>-n<per_category>-v<generator version>``.
+    ``<cache>/procedural/seed-<seed>-n<per_category>-v<generator version>`` (plus
+    ``-x<extra_train>`` with extra training instances: same val split, more train furniture).
     """
     from wpbench.assets.procedural import GENERATOR_VERSION, generate_library
 
     root = Path(cache_dir) if cache_dir is not None else cache_root()
-    folder = root / "procedural" / f"seed-{int(seed)}-n{int(per_category)}-v{GENERATOR_VERSION}"
+    name = f"seed-{int(seed)}-n{int(per_category)}-v{GENERATOR_VERSION}" + (f"-x{int(extra_train)}" if extra_train else "")
+    folder = root / "procedural" / name
     if (folder / "split.json").is_file():
         return folder
     folder.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.tmp-", dir=folder.parent))
     try:
         log.info("generating the procedural furniture library into %s", folder)
-        generate_library(tmp, per_category=per_category, val_per_category=default_val_per_category(per_category), seed=seed)
+        generate_library(tmp, per_category=per_category, val_per_category=default_val_per_category(per_category), seed=seed,
+                         extra_train=extra_train)
         try:
             os.rename(tmp, folder)
         except OSError:
@@ -95,6 +99,7 @@ def load_library(
     categories: Iterable[str] | None = None,
     seed: int = 0,
     per_category: int = 16,
+    extra_train: int = 0,
 ) -> list[FurnitureAsset]:
     """Furniture assets from ``source``.
 
@@ -106,6 +111,8 @@ def load_library(
         split: "train", "val" or None for all. PartNet-Mobility objects carry no split:
             the split is ignored for them (they are all held-out objects).
         categories: keep only these categories (None: all).
+        extra_train: procedural only: that many more training instances per category
+            (for training data; the val instances are unchanged).
 
     Raises:
         ValueError: unknown split or category (the message lists the valid ones), or a
@@ -118,7 +125,7 @@ def load_library(
         from wpbench.assets.procedural import CATEGORIES
 
         _check_names("category", categories, CATEGORIES)
-        folder = procedural_library(seed=seed, per_category=per_category)
+        folder = procedural_library(seed=seed, per_category=per_category, extra_train=extra_train)
         assets = _load_split_folder(folder, split)
     else:
         folder = Path(source).expanduser()

@@ -27,6 +27,9 @@ def generate(
         None, help="Chance an articulated start is drawn in 0-90% open [default: 0.5 for train, 0 for val]."),
     num_action_points: int = typer.Option(256, min=8, help="Action-object points per sample."),
     num_anchor_points: int = typer.Option(1024, min=8, help="Anchor-object points per sample."),
+    extra_train_instances: int = typer.Option(
+        0, min=0, help="Train split only: this many more procedural furniture instances per category "
+        "(the val instances are unchanged and never trained on)."),
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Sample (action cloud, anchor cloud, cross-pose) triples into OUT/<split>/ shards + manifest.json.
@@ -47,11 +50,15 @@ def generate(
     shard_size = max(scene_reuse, shard_size - shard_size % scene_reuse)
     if wide_start_probability is None:
         wide_start_probability = 0.5 if split == "train" else 0.0
+    if extra_train_instances and split != "train":
+        typer.echo("Error: --extra-train-instances adds training furniture; use it with --split train", err=True)
+        raise typer.Exit(2)
     try:
         config = GenerationConfig(
             split=split, obs=obs, seed=seed, samples_per_kind=samples_per_kind, kinds=kinds,
             shard_size=shard_size, scene_reuse=scene_reuse, wide_start_probability=wide_start_probability,
             num_action_points=num_action_points, num_anchor_points=num_anchor_points,
+            extra_train_instances=extra_train_instances,
         )
         report = run_generation(out, config, progress=progress)
     except (ValueError, FileNotFoundError) as err:

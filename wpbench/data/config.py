@@ -34,6 +34,9 @@ class GenerationConfig:
         way from closed to open) instead of the task's own lower quarter, so the
         model also sees half-open doors. Validation keeps the task's distribution (0).
     objects: Ravens objects placed by the free-floating task.
+    extra_train_instances: procedural furniture only: that many more train instances
+        per category than the benchmark's library (12 train / 4 val), numbered after
+        it, so the val furniture stays exactly the benchmark's and is never trained on.
     """
 
     split: str = "train"
@@ -49,6 +52,7 @@ class GenerationConfig:
     num_action_points: int = 256
     num_anchor_points: int = 1024
     assets: str = "procedural"
+    extra_train_instances: int = 0
     extra: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -66,6 +70,8 @@ class GenerationConfig:
                 f"shard_size ({self.shard_size}) must be a multiple of scene_reuse ({self.scene_reuse}) "
                 "so every shard starts with a fresh scene (shards are then independent and reproducible)"
             )
+        if self.extra_train_instances < 0:
+            raise ValueError(f"extra_train_instances must be >= 0, got {self.extra_train_instances}")
         if not 0.0 <= self.wide_start_probability <= 1.0:
             raise ValueError(f"wide_start_probability must be in [0, 1], got {self.wide_start_probability}")
 
@@ -81,6 +87,8 @@ class GenerationConfig:
         d = asdict(self)
         for key in ("samples_per_kind", "kinds"):
             d.pop(key)
+        if not d["extra_train_instances"]:
+            d.pop("extra_train_instances")  # data made before the option existed keeps its fingerprint
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
     def to_json(self) -> dict:

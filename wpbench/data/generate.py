@@ -61,6 +61,8 @@ def make_env(config: GenerationConfig, kind: str):
     )
     if kind == FREE:
         kwargs["objects"] = tuple(config.objects)
+    if config.extra_train_instances and config.split == "train":
+        kwargs["extra_train_instances"] = config.extra_train_instances
     return gym.make(KIND_TASK[kind], **kwargs)
 
 

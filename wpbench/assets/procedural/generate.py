@@ -117,11 +117,15 @@ def generate_library(
     seed: int = 0,
     categories: Iterable[str] | None = None,
     progress: Callable[[Iterable], Iterable] | None = None,
+    extra_train: int = 0,
 ) -> list[FurnitureAsset]:
     """Write ``per_category`` objects of each category into ``out`` plus ``split.json``.
 
     ``split.json`` = {"train": [ids], "val": [ids], "seed": S, "per_category": N,
-    "val_per_category": V, "generator_version": G, "categories": [...]}.
+    "val_per_category": V, "extra_train": X, "generator_version": G, "categories": [...]}.
+    ``extra_train``: further training instances per category, numbered after the
+    first ``per_category`` (an instance does not depend on the library size, so the
+    val instances stay exactly those of the library without them).
     ``progress`` optionally wraps the job list (e.g. ``tqdm``).
     """
     categories = tuple(categories) if categories is not None else CATEGORIES
@@ -131,18 +135,22 @@ def generate_library(
         raise ValueError(f"per_category must be >= 1, got {per_category}")
     if not 0 <= val_per_category < per_category:
         raise ValueError(f"val_per_category must be in [0, per_category), got {val_per_category} with per_category={per_category}")
+    if extra_train < 0:
+        raise ValueError(f"extra_train must be >= 0, got {extra_train}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [(c, i) for c in categories for i in range(per_category)]
+    jobs = [(c, i) for c in categories for i in range(per_category + extra_train)]
     assets = []
     for c, i in progress(jobs) if progress else jobs:
-        assets.append(generate_object(c, i, out, seed, split_of(i, per_category, val_per_category)))
+        split = "train" if i >= per_category else split_of(i, per_category, val_per_category)
+        assets.append(generate_object(c, i, out, seed, split))
     split = {
         "train": [a.object_id for a in assets if a.split == "train"],
         "val": [a.object_id for a in assets if a.split == "val"],
         "seed": int(seed),
         "per_category": int(per_category),
         "val_per_category": int(val_per_category),
+        "extra_train": int(extra_train),
         "categories": list(categories),
         "generator_version": GENERATOR_VERSION,
     }
