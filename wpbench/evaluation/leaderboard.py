@@ -231,43 +231,42 @@ def _bar_labels(frame: "Any") -> list[str]:
 
 
 def plot_leaderboard(frame: "Any", path: str | os.PathLike[str]) -> Path:
-    """Bar chart of success rate (with 95 % interval) per run, grouped by task."""
+    """Success rate (with its 95 % interval) of every run: one panel per task, one labelled
+    horizontal bar per run, best first. Labels sit on the axis, so no colour legend has to be
+    decoded however many runs there are; bar colour marks the asset source."""
     from matplotlib.figure import Figure  # no pyplot: no global state, no display
 
     path = Path(path)
     labels = _bar_labels(frame)
     tasks = list(dict.fromkeys(frame["task"]))
-    series = list(dict.fromkeys(labels))
-    width = 0.8 / max(1, len(series))
-    figure = Figure(figsize=(max(7.0, 2.5 + 0.5 * len(tasks) * max(1, len(series))), 4.5))
-    axes = figure.add_subplot()
-    colours = [f"C{i % 10}" for i in range(len(series))]
-    for index, name in enumerate(series):
-        xs, heights, lower, upper = [], [], [], []
-        for task_index, task in enumerate(tasks):
-            for row, label in zip(frame.itertuples(index=False), labels):
-                if row.task != task or label != name or not math.isfinite(row.success_rate):
-                    continue
-                xs.append(task_index - 0.4 + width * (index + 0.5))
-                heights.append(100 * row.success_rate)
-                low = row.success_ci95_low if math.isfinite(row.success_ci95_low) else row.success_rate
-                high = row.success_ci95_high if math.isfinite(row.success_ci95_high) else row.success_rate
-                lower.append(100 * max(0.0, row.success_rate - low))
-                upper.append(100 * max(0.0, high - row.success_rate))
-        if xs:
-            axes.bar(xs, heights, width=width * 0.95, label=name, color=colours[index],
-                     yerr=[lower, upper], capsize=3, ecolor="black")
-    axes.set_xticks(range(len(tasks)), tasks)
-    axes.set_xlim(-0.6, len(tasks) - 0.4)
-    axes.set_ylim(0, 105)
-    axes.set_ylabel("success rate (%)")
-    axes.set_title("wpbench: success in simulation (bars: 95% Wilson interval)")
-    axes.grid(axis="y", alpha=0.3)
-    if series:
-        # Outside the axes: bars reach 100 % and would hide under a legend.
-        axes.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+    sources = list(dict.fromkeys(str(s) for s in frame["asset_source"]))
+    colour_of = {source: f"C{i % 10}" for i, source in enumerate(sources)}
+    rows_per_task = [sum(1 for t in frame["task"] if t == task) for task in tasks] or [1]
+    figure = Figure(figsize=(13.0, 1.2 + 0.28 * max(rows_per_task)))
+    for panel, task in enumerate(tasks or ["(no runs)"]):
+        axes = figure.add_subplot(1, max(1, len(tasks)), panel + 1)
+        runs = [(row, label) for row, label in zip(frame.itertuples(index=False), labels)
+                if row.task == task and math.isfinite(row.success_rate)]
+        runs.sort(key=lambda item: (item[0].success_rate, item[1]))  # best at the top
+        for y, (row, label) in enumerate(runs):
+            low = row.success_ci95_low if math.isfinite(row.success_ci95_low) else row.success_rate
+            high = row.success_ci95_high if math.isfinite(row.success_ci95_high) else row.success_rate
+            error = [[100 * max(0.0, row.success_rate - low)], [100 * max(0.0, high - row.success_rate)]]
+            axes.barh(y, 100 * row.success_rate, color=colour_of[str(row.asset_source)], xerr=error,
+                      capsize=2, ecolor="black", height=0.75)
+        axes.set_yticks(range(len(runs)), [label for _, label in runs], fontsize="small")
+        axes.set_xlim(0, 105)
+        axes.set_xlabel("success rate (%)")
+        axes.set_title(task)
+        axes.grid(axis="x", alpha=0.3)
+    if sources:
+        from matplotlib.patches import Patch
+
+        handles = [Patch(color=colour_of[s], label=_short_source(s)) for s in sources]
+        figure.legend(handles=handles, loc="upper right", ncol=len(handles), fontsize="small", frameon=False)
+    figure.suptitle("wpbench: success in simulation (whiskers: 95% Wilson interval)")
     figure.tight_layout()
-    figure.savefig(path, dpi=120)
+    figure.savefig(path, dpi=110)
     return path
 
 
