@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wpbench.assets.spec import FurnitureAsset
+from wpbench.assets.spec import FurnitureAsset, rest_joint_values
 
 
 @dataclass(frozen=True)
@@ -83,12 +83,9 @@ def render_states(asset: FurnitureAsset, qpos_values: list[float], config: Rende
     camera = scene.add_camera("viewer", config.width, config.height, np.deg2rad(config.fovy_deg), 0.02, 50.0)
     camera.entity.set_pose(sapien.Pose(look_at(eye, centre)))
 
-    # Other joints rest closed: at the value the asset records (PartNet objects), else the
-    # limit nearest 0, as in the simulator (wpbench.sim.furniture).
+    # Other joints rest closed, as in the simulator.
     limits = np.array([j.get_limits()[0] for j in art.get_active_joints()], dtype=float)
-    rest = np.clip(np.zeros(len(names)), limits[:, 0], limits[:, 1])
-    for i, name in enumerate(names):
-        rest[i] = float(asset.extra.get("closed_qpos_by_joint", {}).get(name, rest[i]))
+    rest = rest_joint_values(asset, names, limits)
     region_entity = None
     images = []
     for q in qpos_values:

@@ -118,3 +118,20 @@ class FurnitureAsset:
     def load(cls, path: Path) -> "FurnitureAsset":
         path = Path(path)
         return cls.from_json(json.loads(path.read_text()), relative_to=path.parent)
+
+
+def rest_joint_values(asset: "FurnitureAsset", joint_names: list[str], limits: np.ndarray) -> np.ndarray:
+    """Where each joint rests when the furniture is closed: the value the asset records
+    (``extra["closed_qpos_by_joint"]``, PartNet-Mobility objects), else the end of its range
+    nearest 0 (unlimited joints such as knobs rest at 0); the target joint at ``closed_qpos``.
+
+    joint_names: the articulation's active joints in order; limits (J, 2). Returns (J,).
+    """
+    rest = np.clip(np.zeros(len(joint_names)), limits[:, 0], limits[:, 1])
+    closed_by_joint = asset.extra.get("closed_qpos_by_joint", {})
+    for i, name in enumerate(joint_names):
+        if name in closed_by_joint:
+            rest[i] = float(closed_by_joint[name])
+        if name == asset.target_joint:
+            rest[i] = asset.closed_qpos
+    return rest

@@ -14,7 +14,7 @@ import numpy as np
 import trimesh
 from sapien import physx
 
-from wpbench.assets.spec import FurnitureAsset
+from wpbench.assets.spec import FurnitureAsset, rest_joint_values
 from wpbench.sim.collision_mesh import body_mesh
 from wpbench.sim.poses import pose_to_matrix, transform_points
 
@@ -50,13 +50,7 @@ class SceneFurniture:
         self.links = self.articulation.get_links()
         self._mesh_cache: dict[str, trimesh.Trimesh | None] = {}
         limits = np.array([j.get_limits()[0] for j in joints], dtype=np.float64)
-        # Unlimited joints (knobs) rest at 0; limited ones at the end nearest 0.
-        self.rest_qpos = np.clip(np.zeros(len(joints)), limits[:, 0], limits[:, 1])
-        closed_by_joint = self.asset.extra.get("closed_qpos_by_joint", {})
-        for i, name in enumerate(names):
-            if name in closed_by_joint:
-                self.rest_qpos[i] = float(closed_by_joint[name])
-        self.rest_qpos[self.target_index] = self.asset.closed_qpos
+        self.rest_qpos = rest_joint_values(self.asset, names, limits)
         for j in joints:
             j.set_drive_properties(DRIVE_STIFFNESS, DRIVE_DAMPING, DRIVE_FORCE_LIMIT, "acceleration")
             j.set_friction(0.0)

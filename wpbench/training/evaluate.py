@@ -52,8 +52,9 @@ def per_sample_errors(
             columns["point_m"].append(metrics.point_error(T_pred, T_gt, pts)[0])
     finally:
         model.train(was_training)
-    empty = torch.zeros(0, dtype=torch.float64)
-    return {key: torch.cat(values) if values else empty for key, values in columns.items() if values or key != "w"}
+    # "w" only for models that predict a mixing weight.
+    return {key: torch.cat(values) if values else torch.zeros(0, dtype=torch.float64)
+            for key, values in columns.items() if values or key != "w"}
 
 
 def evaluate(
@@ -71,13 +72,12 @@ def evaluate(
 
     Means are over finite predictions; ``failures`` counts samples whose prediction was NaN.
     """
-    generator_seed = seed
     results: dict[str, dict[str, float]] = {}
     for kind in kinds:
         idx = torch.nonzero(dataset.kind == KIND_CODE[kind]).flatten()
         if len(idx) > per_kind:  # spread over the whole split (consecutive samples share furniture)
             idx = idx[torch.linspace(0, len(idx) - 1, per_kind).round().long()]
-        errors = per_sample_errors(model, dataset, idx, num_action, num_anchor, batch_size, generator_seed)
+        errors = per_sample_errors(model, dataset, idx, num_action, num_anchor, batch_size, seed)
         results[kind] = _summarise(errors)
     return results
 
