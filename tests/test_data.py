@@ -87,8 +87,8 @@ def test_dataset_names_the_command_when_data_is_missing(tmp_path):
 
 
 @settings(max_examples=25)
-@given(seed=st.integers(0, 2**31 - 1))
-def test_yaw_augmentation_keeps_the_ground_truth_consistent(seed):
+@given(seed=st.integers(0, 2**31 - 1), mirror=st.booleans())
+def test_yaw_augmentation_keeps_the_ground_truth_consistent(seed, mirror):
     g = torch.Generator().manual_seed(seed)
     B, N = 3, 20
     yaw = (torch.rand(B, generator=g, dtype=torch.float64) * 2 - 1) * math.pi
@@ -102,12 +102,32 @@ def test_yaw_augmentation_keeps_the_ground_truth_consistent(seed):
     p = torch.randn(B, N, 3, generator=g, dtype=torch.float64)
     goal = p @ T[:, :3, :3].transpose(1, 2) + T[:, :3, 3:].transpose(1, 2)
     # The goal rides along as the "anchor" so we can check T' p' = goal' after augmentation.
-    out = random_yaw({"action": p, "anchor": goal, "gt_transform": T}, g)
+    out = random_yaw({"action": p, "anchor": goal, "gt_transform": T}, g, mirror=mirror)
     T2 = out["gt_transform"]
     moved = out["action"] @ T2[:, :3, :3].transpose(1, 2) + T2[:, :3, 3:].transpose(1, 2)
     torch.testing.assert_close(moved, out["anchor"], atol=1e-9, rtol=0)
     assert not torch.allclose(out["action"], p)  # the scene did turn
     torch.testing.assert_close(out["action"][..., 2], p[..., 2])  # about z only
+    # Still a rigid motion (a mirror must not leak into T), rotating as much as before.
+    R2 = T2[:, :3, :3]
+    torch.testing.assert_close(R2 @ R2.transpose(1, 2), torch.eye(3, dtype=torch.float64).expand(B, 3, 3), atol=1e-9, rtol=0)
+    torch.testing.assert_close(torch.linalg.det(R2), torch.ones(B, dtype=torch.float64), atol=1e-9, rtol=0)
+    trace = lambda R: R.diagonal(dim1=-2, dim2=-1).sum(-1)  # noqa: E731
+    torch.testing.assert_close(trace(R2), trace(T[:, :3, :3]), atol=1e-9, rtol=0)
+
+
+def test_mirror_augmentation_reflects_about_half_the_scenes():
+    g = torch.Generator().manual_seed(0)
+    B = 400
+    p = torch.randn(B, 6, 3, dtype=torch.float64, generator=g)
+    batch = {"action": p, "anchor": p.clone(), "gt_transform": torch.eye(4, dtype=torch.float64).repeat(B, 1, 1)}
+    def orientation(x):  # sign of the triple product of three points: a reflection flips it
+        return torch.sign(torch.linalg.det(x[:, :3] - x[:, 3:4]))
+    plain = random_yaw(batch, torch.Generator().manual_seed(1), mirror=False)
+    mirrored = random_yaw(batch, torch.Generator().manual_seed(1), mirror=True)
+    assert bool((orientation(plain["action"]) == orientation(p)).all())  # a yaw never reflects
+    flipped = (orientation(mirrored["action"]) != orientation(p)).double().mean()
+    assert 0.4 < float(flipped) < 0.6
 
 
 def test_symmetric_target_is_an_equivalent_pose_with_the_least_rotation():

@@ -29,6 +29,7 @@ def train(
     threads: int = typer.Option(1, min=1, help="torch threads (1 when two trainings share the machine)."),
     seed: int = typer.Option(0, help="Seed for initialisation, shuffling and augmentation."),
     augment: bool = typer.Option(True, help="Random yaw of each training scene."),
+    mirror: bool = typer.Option(True, help="With --augment: also mirror half the scenes (left and right hinges)."),
     restart: bool = typer.Option(False, help="Ignore an existing checkpoint and start from scratch."),
     select_best: bool = typer.Option(False, "--select-best",
                                      help="Do not train: write WEIGHTS_ROOT/best.json from the trained WeightedPose variants."),
@@ -57,7 +58,7 @@ def train(
         config = TrainConfig(
             policy=policy, data=data, out=out, weights_root=weights_root, minutes=minutes, max_steps=max_steps,
             steps_per_epoch=steps_per_epoch, batch_size=batch_size, learning_rate=learning_rate, lr_schedule=lr_schedule,
-            num_action_points=num_action_points, num_anchor_points=num_anchor_points, augment_yaw=augment,
+            num_action_points=num_action_points, num_anchor_points=num_anchor_points, augment_yaw=augment, augment_mirror=mirror,
             val_per_kind=val_per_kind, final_val_per_kind=final_val_per_kind, seed=seed, threads=threads,
         )
         metrics = run_training(config, echo=typer.echo, restart=restart)

@@ -5,6 +5,13 @@ whole scene moves every point ``p -> A p``; the cross-pose that takes the
 rotated action object to its rotated goal is ``T' = A T A^-1``, because
 ``A p_goal = A T p = (A T A^-1) (A p)``. Gravity stays along z, so the
 augmented scene is one the simulator could have produced.
+
+A mirror ``M`` in a vertical plane (``y -> -y``) keeps gravity too, and the same
+rule holds: ``M T M^-1`` is again a rigid motion (``det(M R M) = det R``, the
+reflections cancel). It turns a left-hinged door into a right-hinged one, so
+the training furniture counts twice for the hinge side, which a model must read
+from the handle. A least-rotation target stays least-rotation, because the
+mirror conjugates every symmetric equivalent alike and keeps rotation angles.
 """
 
 from __future__ import annotations
@@ -23,20 +30,30 @@ def yaw_rotations(angles: torch.Tensor) -> torch.Tensor:
     return A
 
 
-def random_yaw(batch: dict[str, torch.Tensor], generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:
-    """Rotate each sample of ``batch`` by its own random yaw in [-pi, pi).
+def random_yaw(
+    batch: dict[str, torch.Tensor], generator: torch.Generator | None = None, mirror: bool = False
+) -> dict[str, torch.Tensor]:
+    """Rotate each sample of ``batch`` by its own random yaw in [-pi, pi), and with
+    ``mirror`` reflect half of them (at random) in the plane y = 0 first.
 
-    batch: ``action`` (B, NA, 3), ``anchor`` (B, NB, 3), ``gt_transform`` (B, 4, 4);
+    batch: ``action`` (B, NA, 3), ``anchor`` (B, NB, 3), ``gt_transform`` (B, 4, 4),
+    optionally ``gt_equivalents`` (B, K, 4, 4) (moved like ``gt_transform``);
     other keys are passed through. Returns a new dict (inputs are not modified).
     """
     B = batch["action"].shape[0]
     dtype = batch["action"].dtype
     angles = (torch.rand(B, generator=generator, dtype=torch.float64) * 2 - 1) * math.pi
     A = yaw_rotations(angles)
+    if mirror:
+        flip = torch.rand(B, generator=generator, dtype=torch.float64) < 0.5
+        A[:, :, 1] = torch.where(flip[:, None], -A[:, :, 1], A[:, :, 1])  # A <- A diag(1, -1, 1, 1)
     R = A[:, :3, :3].to(dtype)
     out = dict(batch)
     out["action"] = batch["action"] @ R.transpose(1, 2)
     out["anchor"] = batch["anchor"] @ R.transpose(1, 2)
     T = batch["gt_transform"].to(torch.float64)
     out["gt_transform"] = (A @ T @ A.transpose(1, 2)).to(batch["gt_transform"].dtype)
+    if "gt_equivalents" in batch:
+        E = batch["gt_equivalents"].to(torch.float64)
+        out["gt_equivalents"] = (A[:, None] @ E @ A.transpose(1, 2)[:, None]).to(batch["gt_equivalents"].dtype)
     return out

@@ -6,7 +6,10 @@ every epoch.
 
 Item (one sample): ``action`` (NA, 3) float32, ``anchor`` (NB, 3) float32,
 ``gt_transform`` (4, 4) float32, ``kind`` () int64 (0 articulated, 1 free),
-``index`` () int64 (position in the dataset). ``categories`` / ``object_ids``
+``index`` () int64 (position in the dataset). ``gt_equivalents`` (N, K, 4, 4)
+float32 holds every sample's equally correct goals (``equivalent_goals``; row 0
+is ``gt_transform``, short rows repeat it; K = 1 for data without symmetric
+objects or made before shards stored ``action_pose``). ``categories`` / ``object_ids``
 are kept as lists beside the tensors for per-category reporting; ``content_hash``
 identifies exactly the shards loaded (a resumed training run checks it).
 """
@@ -22,6 +25,7 @@ import torch
 from torch.utils.data import Dataset
 
 from wpbench.data.config import KIND_CODE, KINDS
+from wpbench.data.equivalent_goals import equivalent_goals
 from wpbench.data.manifest import read_manifest
 from wpbench.data.shards import read_shard
 
@@ -66,6 +70,7 @@ class CrossPoseDataset(Dataset):
         self.categories = [str(c) for c in data["category"]]
         self.object_ids = [str(c) for c in data["object_id"]]
         self.seeds = data["seed"].astype(np.int64)
+        self.gt_equivalents = torch.from_numpy(_equivalent_goal_table(data).astype(np.float32))
         if not (len(self.action) == len(self.anchor) == len(self.gt_transform) == len(self.kind)):
             raise ValueError(f"{self.directory}: shard arrays disagree in length")
 
@@ -83,3 +88,25 @@ class CrossPoseDataset(Dataset):
 
     def count(self, kind: str) -> int:
         return int((self.kind == KIND_CODE[kind]).sum())
+
+
+def _equivalent_goal_table(data: dict[str, np.ndarray]) -> np.ndarray:
+    """(N, K, 4, 4): each sample's equivalent goals under its Ravens object's discrete symmetries."""
+    from wpbench.assets.ravens import RAVENS_OBJECTS
+
+    T = data["gt_transform"].astype(np.float64)
+    if "action_pose" not in data:
+        return T[:, None]
+    groups: dict[str, np.ndarray] = {}
+    for name in set(str(n) for n in data["free_object"]):
+        if name in RAVENS_OBJECTS:
+            discrete = RAVENS_OBJECTS[name].symmetry.discrete.numpy()
+            # The identity gives gt_transform itself, which is row 0 already.
+            groups[name] = discrete[~np.isclose(discrete, np.eye(3), atol=1e-9).all(axis=(1, 2))]
+    K = 1 + max((len(g) for g in groups.values()), default=0)
+    table = np.repeat(T[:, None], K, axis=1)
+    for i, name in enumerate(data["free_object"]):
+        group = groups.get(str(name))
+        if group is not None and len(group):
+            table[i, 1:1 + len(group)] = equivalent_goals(T[i], data["action_pose"][i], group)
+    return table

@@ -24,6 +24,7 @@ import numpy as np
 from wpbench.data.config import ARTICULATED, FREE, KIND_CODE, KIND_TASK, SPLITS, GenerationConfig
 from wpbench.data.manifest import build_manifest, split_dir, write_manifest
 from wpbench.data.shards import shard_path, stack_samples, write_shard
+from wpbench.data.equivalent_goals import equivalent_goals
 
 
 @dataclass
@@ -67,24 +68,16 @@ def make_env(config: GenerationConfig, kind: str):
 
 
 def symmetric_min_rotation(T: np.ndarray, object_pose: np.ndarray, discrete: np.ndarray) -> np.ndarray:
-    """Among the cross-poses that are equivalent for a symmetric object, the one that rotates least.
+    """Among the equivalent goals of a symmetric object (``equivalent_goals``), the one that rotates least.
 
-    An object at pose ``O`` looks the same at ``O S`` for a symmetry ``S`` (object frame),
-    so ``T O S O^-1`` reaches an equally good goal. Picking the smallest rotation makes the
-    target a function of what the model sees (it cannot tell the symmetric poses apart).
-
-    T, object_pose (4, 4); discrete (K, 3, 3) -> (4, 4).
+    Picking the smallest rotation makes the stored target a function of what the model
+    sees (it cannot tell the symmetric poses apart). T, object_pose (4, 4); discrete (K, 3, 3) -> (4, 4).
     """
-    best, best_angle = T, np.inf
-    inv = np.linalg.inv(object_pose)
-    for S in discrete:
-        S4 = np.eye(4)
-        S4[:3, :3] = S
-        candidate = T @ object_pose @ S4 @ inv
-        angle = np.arccos(np.clip((np.trace(candidate[:3, :3]) - 1) / 2, -1.0, 1.0))
-        if angle < best_angle - 1e-9:
-            best, best_angle = candidate, angle
-    return best
+    candidates = equivalent_goals(T, object_pose, discrete)
+    cosines = (np.trace(candidates[:, :3, :3], axis1=1, axis2=2) - 1) / 2
+    angles = np.arccos(np.clip(cosines, -1.0, 1.0))
+    # The first of the (numerically) smallest, so ties resolve the same way on every machine.
+    return candidates[int(np.flatnonzero(angles <= angles.min() + 1e-9)[0])]
 
 
 def draw_sample(env, config: GenerationConfig, kind: str, index: int) -> dict:
@@ -115,15 +108,19 @@ def draw_sample(env, config: GenerationConfig, kind: str, index: int) -> dict:
     free_object = ""
     if kind == FREE:
         free_object = base.free_spec.name
+        action_pose = pose_to_matrix(base.free_body.entity_pose)
         symmetry = getattr(base.free_spec, "symmetry", None)
         if symmetry is not None and getattr(symmetry, "discrete", None) is not None:
             discrete = np.asarray(symmetry.discrete, dtype=np.float64).reshape(-1, 3, 3)
-            T = symmetric_min_rotation(T_raw, pose_to_matrix(base.free_body.entity_pose), discrete)
+            T = symmetric_min_rotation(T_raw, action_pose, discrete)
+    else:
+        action_pose = base.furniture.target_link_pose()
     return {
         "action_points": obs["action_points"][0].cpu().numpy(),
         "anchor_points": obs["anchor_points"][0].cpu().numpy(),
         "gt_transform": T,
         "gt_transform_raw": T_raw,
+        "action_pose": action_pose,
         "kind": KIND_CODE[kind],
         "category": base.asset.category,
         "object_id": base.asset.object_id,

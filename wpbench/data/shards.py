@@ -8,6 +8,7 @@ Schema (S samples, NA action points, NB anchor points):
 | ``anchor_points`` | (S, NB, 3) | float32 | anchor object cloud, world frame |
 | ``gt_transform`` | (S, 4, 4) | float64 | cross-pose, ``p_goal = T p_now``; for a symmetric free object the equivalent one with the smallest rotation |
 | ``gt_transform_raw`` | (S, 4, 4) | float64 | the task's own cross-pose |
+| ``action_pose`` | (S, 4, 4) | float64 | the action object's (free) or moving link's (articulated) world pose when observed: its symmetries act in this frame |
 | ``kind`` | (S,) | int8 | 0 articulated, 1 free-floating |
 | ``category`` | (S,) | str | furniture category |
 | ``object_id`` | (S,) | str | furniture instance |
@@ -26,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 ARRAY_KEYS = (
-    "action_points", "anchor_points", "gt_transform", "gt_transform_raw", "kind", "category",
+    "action_points", "anchor_points", "gt_transform", "gt_transform_raw", "action_pose", "kind", "category",
     "object_id", "free_object", "seed", "start_fraction", "camera_fallback",
 )
 
@@ -44,6 +45,7 @@ def stack_samples(samples: list[dict], fingerprint: str) -> dict[str, np.ndarray
     out["anchor_points"] = out["anchor_points"].astype(np.float32)
     out["gt_transform"] = out["gt_transform"].astype(np.float64)
     out["gt_transform_raw"] = out["gt_transform_raw"].astype(np.float64)
+    out["action_pose"] = out["action_pose"].astype(np.float64)
     out["kind"] = out["kind"].astype(np.int8)
     out["seed"] = out["seed"].astype(np.int64)
     out["start_fraction"] = out["start_fraction"].astype(np.float32)

@@ -41,8 +41,9 @@ def write_synthetic_split(root: Path, split: str, per_kind: int = 4, num_action_
             T = _random_cross_pose(rng)
             samples.append({
                 "action_points": action, "anchor_points": anchor, "gt_transform": T, "gt_transform_raw": T,
+                "action_pose": np.eye(4),
                 "kind": KIND_CODE[kind], "category": "synthetic", "object_id": f"synthetic-{i % 2}",
-                "free_object": "" if kind == KINDS[0] else "block", "seed": i,
+                "free_object": "" if kind == KINDS[0] else "synthetic", "seed": i,
                 "start_fraction": 0.1 if kind == KINDS[0] else np.nan, "camera_fallback": False,
             })
         write_shard(shard_path(directory, kind, 0), stack_samples(samples, config.sample_fingerprint()))

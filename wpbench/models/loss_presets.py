@@ -31,10 +31,14 @@ from typing import Literal
 
 import torch
 
+from wpbench.data.equivalent_goals import nearest_goal
 from wpbench.models import losses
 from wpbench.models.output import CrossPoseOutput
 
 PoseForTaxPoseTerms = Literal["output", "taxpose_branch"]
+
+# A symmetric object's other goals count only once the output is this close to one of them.
+RETARGET_WITHIN_DEG = 15.0
 
 
 @dataclass(frozen=True)
@@ -127,7 +131,10 @@ def compute_loss(
     """Total loss and its named, unweighted terms (detached, for logging).
 
     output: the model's CrossPoseOutput for ``batch["action"]``, ``batch["anchor"]``.
-    batch: ``action`` (B,NA,3), ``anchor`` (B,NB,3), ``gt_transform`` (B,4,4).
+    batch: ``action`` (B,NA,3), ``anchor`` (B,NB,3), ``gt_transform`` (B,4,4), and optionally
+    ``gt_equivalents`` (B,K,4,4): then every term compares against the equivalent goal nearest
+    to the output among those within ``RETARGET_WITHIN_DEG`` of it, else the stored goal (a
+    symmetric object's goals are all correct; see ``equivalent_goals``).
     Raises ValueError if the model lacks a diagnostic the preset needs
     (e.g. ``tp`` on a Goal Flow model).
     """
@@ -135,6 +142,8 @@ def compute_loss(
     _check_batch(output, batch)
     action, anchor, T_gt = batch["action"], batch["anchor"], batch["gt_transform"].to(output.transform.dtype)
     T_out = output.transform
+    if "gt_equivalents" in batch:
+        T_gt = nearest_goal(T_out, batch["gt_equivalents"], within_deg=RETARGET_WITHIN_DEG).to(T_out.dtype)
     T_tax = output.require("taxpose_transform") if preset.taxpose_pose == "taxpose_branch" else T_out
 
     term_functions = {

@@ -32,18 +32,20 @@ def make_batch(dataset: CrossPoseDataset, indices: torch.Tensor) -> dict[str, to
         "action": dataset.action[indices],
         "anchor": dataset.anchor[indices],
         "gt_transform": dataset.gt_transform[indices],
+        "gt_equivalents": dataset.gt_equivalents[indices],
         "kind": dataset.kind[indices],
     }
 
 
 def prepare(
-    batch: dict[str, torch.Tensor], num_action: int, num_anchor: int, augment: bool, generator: torch.Generator
+    batch: dict[str, torch.Tensor], num_action: int, num_anchor: int, augment: bool, generator: torch.Generator,
+    mirror: bool = False,
 ) -> dict[str, torch.Tensor]:
-    """Subsample both clouds and (optionally) rotate the scene by a random yaw."""
+    """Subsample both clouds and (optionally) rotate the scene by a random yaw, mirrored half the time."""
     out = dict(batch)
     out["action"] = subsample_points(batch["action"], num_action, generator)
     out["anchor"] = subsample_points(batch["anchor"], num_anchor, generator)
-    return random_yaw(out, generator) if augment else out
+    return random_yaw(out, generator, mirror) if augment else out
 
 
 def shuffled_batches(size: int, batch_size: int, generator: torch.Generator) -> Iterator[torch.Tensor]:

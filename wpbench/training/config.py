@@ -49,6 +49,7 @@ class TrainConfig:
     num_action_points: int = 128
     num_anchor_points: int = 512
     augment_yaw: bool = True
+    augment_mirror: bool = True  # with augment_yaw: also reflect half the scenes (wpbench.data.augment)
     val_per_kind: int = 32
     final_val_per_kind: int = 200
     seed: int = 0

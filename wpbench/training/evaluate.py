@@ -1,9 +1,9 @@
 """Validation errors of a model on a dataset, per kind (DESIGN.md metrics).
 
-rotation error (deg, no symmetry: free-object targets are already the
-least-rotation equivalent, see ``wpbench.data.generate``), translation error (m,
-goal position of the action centroid), point error (m, mean |T_pred p - T_gt p|
-over the action points).
+rotation error (deg), translation error (m, goal position of the action
+centroid), point error (m, mean |T_pred p - T_gt p| over the action points),
+all against the equivalent goal nearest to the prediction in rotation (for a symmetric
+object every equivalent goal is correct; ``wpbench.data.equivalent_goals``).
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import torch
 
 from wpbench.data.config import KIND_CODE, KINDS
 from wpbench.data.dataset import CrossPoseDataset
+from wpbench.data.equivalent_goals import nearest_goal
 from wpbench.geometry import metrics
 from wpbench.training.batches import make_batch, subsample_points
 
@@ -45,7 +46,7 @@ def per_sample_errors(
             T_pred = output.transform.double()
             if "w" in output.diagnostics:
                 columns["w"].append(output.diagnostics["w"].reshape(len(T_pred), -1).mean(dim=1).double())
-            T_gt = batch["gt_transform"].double()
+            T_gt = nearest_goal(T_pred, batch["gt_equivalents"].double())
             pts = action.double()
             columns["rot_deg"].append(metrics.rotation_error_deg(T_pred[:, :3, :3], T_gt[:, :3, :3]))
             columns["trans_m"].append(metrics.translation_error(T_pred, T_gt, pts.mean(dim=1)))

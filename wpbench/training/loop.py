@@ -147,7 +147,8 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
             for group in optimizer.param_groups:
                 group["lr"] = scheduled_lr(lr, config.lr_schedule, elapsed + time.perf_counter() - started, budget)
             batch = prepare(make_batch(train_set, next(batches)), config.num_action_points,
-                            config.num_anchor_points, config.augment_yaw, generator)
+                            config.num_anchor_points, config.augment_yaw, generator,
+                            config.augment_mirror)
             output = model(batch["action"], batch["anchor"])
             loss, terms = compute_loss(output, batch, spec.loss_preset)
             optimizer.zero_grad(set_to_none=True)

@@ -22,7 +22,7 @@ class SafeRanges:
     wall: tuple[float, float] = (0.03, 0.06)
     door_thickness: tuple[float, float] = (0.05, 0.10)
     foot_height: tuple[float, float] = (0.02, 0.05)
-    open_angle_deg: tuple[float, float] = (90.0, 110.0)
+    open_angle_deg: tuple[float, float] = (100.0, 100.0)  # a fixed door stop: see FridgeRanges.open_angle_deg
     door_mass: tuple[float, float] = (8.0, 15.0)
     min_compartment: float = 0.23
 

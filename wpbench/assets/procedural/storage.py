@@ -1,7 +1,7 @@
 """Storage furniture: a chest of drawers (one or two columns) on a plinth or legs.
 
 Each drawer is a prismatic link: an overlay front panel plus an open box (bottom,
-two sides, back) that slides along +x. The open limit is a fraction (0.70-0.85) of
+two sides, back) that slides along +x. The open limit is a fixed fraction (0.8) of
 the drawer box's depth, so an open drawer stays on its runners.
 
 What "in" means for a drawer: the drawer box moves, so the in-region is defined in
@@ -31,7 +31,7 @@ class StorageRanges:
     drawer_wall: tuple[float, float] = (0.008, 0.014)
     plinth_height: tuple[float, float] = (0.04, 0.10)
     leg_height: tuple[float, float] = (0.08, 0.16)
-    open_fraction: tuple[float, float] = (0.70, 0.85)
+    open_fraction: tuple[float, float] = (0.80, 0.80)  # a fixed stop, unseen by the camera: see FridgeRanges.open_angle_deg
     drawer_mass: tuple[float, float] = (1.5, 4.0)
     min_opening: float = 0.25  # drawer opening height: a 16 cm block + drawer floor + margin
 
