@@ -125,3 +125,21 @@ def test_shipped_weights_say_how_they_were_made():
         metrics = json.loads((WEIGHTS_ROOT / name / "metrics.json").read_text())
         assert config["policy"] == name and config["train_config"]["minutes"] <= 60
         assert metrics["val"] and metrics["peak_rss_mib"] < 8 * 1024
+
+
+def test_a_run_records_the_weights_and_furniture_it_was_made_with(weights_root):
+    """run.json keeps the model hashes (both experts for the oracle) and the generator version,
+    so that --resume never mixes episodes of retrained weights into an old run."""
+    from wpbench.assets.procedural.generate import GENERATOR_VERSION
+    from wpbench.evaluation.runner import RunConfig, produced_by
+
+    def config(name):
+        return json.loads((weights_root / name / "config.json").read_text())
+
+    oracle = make_policy("oracle", weights_root=weights_root)
+    made = produced_by(RunConfig(policy="oracle"), oracle)
+    assert made == {"policy_weights": sorted({config("gf")["model_hash"], config("tp")["model_hash"]}),
+                    "furniture_generator": GENERATOR_VERSION}
+    gf = produced_by(RunConfig(policy="gf", assets="../shared/partnet-mobility"), LearnedPolicy(policy="gf", weights_root=weights_root))
+    assert gf == {"policy_weights": [config("gf")["model_hash"]], "furniture_generator": None}  # real objects: no generator
+    assert produced_by(RunConfig(policy="gt"), make_policy("gt"))["policy_weights"] == []

@@ -141,7 +141,9 @@ def test_resume_reports_completed_episodes_and_continues(tmp_path):
     assert sorted(r["episode"] for r in read_episodes(tmp_path)) == [0, 1, 2, 3]
 
 
-@pytest.mark.parametrize("key, value", [("policy", "tp"), ("task", "open"), ("split", "test"), ("seed", 1)])
+@pytest.mark.parametrize("key, value", [("policy", "tp"), ("task", "open"), ("split", "test"), ("seed", 1),
+                                        # retrained weights or rebuilt furniture make a different run too
+                                        ("policy_weights", ["0f1e2d3c4b5a6978"]), ("furniture_generator", 99)])
 def test_resume_refuses_a_different_run(tmp_path, key, value):
     with EpisodeWriter(tmp_path, CONFIG) as writer:
         writer.write(make_record(0))

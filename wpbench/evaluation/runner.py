@@ -141,6 +141,29 @@ def run_episode(env, policy, seed: int, observer=None) -> dict[str, Any]:
     return record
 
 
+def produced_by(cfg: RunConfig, policy) -> dict[str, Any]:
+    """What decides an episode beside the run's settings: the trained weights the policy
+    loaded (their ``model_hash``es, none for ``gt`` / ``identity``) and the version of the
+    furniture generator (built-in assets only). ``run.json`` stores these, so ``--resume``
+    refuses to append episodes of retrained weights or rebuilt furniture to an old run."""
+    hashes: set[str] = set()
+
+    def collect(value: Any) -> None:
+        if isinstance(value, dict):
+            if value.get("model_hash"):
+                hashes.add(str(value["model_hash"]))
+            for item in value.values():
+                collect(item)
+
+    collect(policy.describe())
+    generator = None
+    if cfg.assets == "procedural":
+        from wpbench.assets.procedural.generate import GENERATOR_VERSION
+
+        generator = GENERATOR_VERSION
+    return {"policy_weights": sorted(hashes), "furniture_generator": generator}
+
+
 def run_benchmark(
     cfg: RunConfig,
     progress: bool = True,
@@ -156,9 +179,10 @@ def run_benchmark(
     from wpbench.evaluation.summary import summarize, write_summary
 
     out = Path(cfg.out) if cfg.out is not None else cfg.default_out()
+    policy = policy or make_policy(cfg.policy, **cfg.policy_kwargs)
     run_config = {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(cfg).items()}
     run_config["out"] = str(out)
-    policy = policy or make_policy(cfg.policy, **cfg.policy_kwargs)
+    run_config.update(produced_by(cfg, policy))
     started = time.perf_counter()
     with EpisodeWriter(out, run_config, resume=cfg.resume) as writer:
         done = writer.completed_episodes()
