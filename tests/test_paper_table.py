@@ -45,3 +45,16 @@ def test_category_rows_show_each_category_of_each_kind():
     assert [c.strip() for c in header.strip("|").split("|")] == ["policy", "kind", "fridge", "oven"]
     assert "| gf | articulated | 30.0 / 20.0 | 2.5 / 3.1 |" in text
     assert "| gf | free-floating | - | 9.0 / 5.0 |" in text
+
+
+def test_real_object_runs_get_their_own_section_only_when_there_are_some():
+    cfg = PaperTableConfig(policies=("gf", "wp-postsvd"))
+    built_in = {("gf", "open-door"): {"success_rate": 0.9, "success_ci95": [0.8, 0.95], "episodes": 100}}
+    real = {("wp-postsvd", "place-in"): {"success_rate": 0.65, "success_ci95": [0.43, 0.82], "episodes": 20}}
+    assert "PartNet-Mobility" not in render(cfg, {}, built_in)
+    lines = render(cfg, {}, built_in, real_successes=real).splitlines()
+    start = next(i for i, line in enumerate(lines) if "real PartNet-Mobility" in line)
+    section = lines[start:]
+    assert "| wp-postsvd | not run | 65% [43, 82] (n=20) | not run |" in section
+    assert "| gf | not run | not run | not run |" in section  # the built-in 90% stays in its own table
+    assert "| gf | 90% [80, 95] (n=100) | not run | not run |" in lines[:start]

@@ -10,6 +10,10 @@ Two tables, one command (``wpbench paper-table``):
 3. Simulated success rate (95% Wilson interval) of each policy on every task,
    val split, built-in furniture: read from ``results/runs/<policy>__<task>__val__procedural__<obs>``
    and, with ``run_missing``, run there first.
+4. The same on the real PartNet-Mobility objects, where those runs exist
+   (``results/runs/<policy>__<task>__val__partnet-mobility__<obs>``, made by
+   ``scripts/reference_runs.sh``): how far policies trained on the built-in
+   furniture carry to furniture they never saw.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ POLICIES = ("gf", "tp", "oracle", "wp-og", "wp-postsvd", "wp-postsvd-t")
 TASKS = ("open-door", "place-in", "open-then-place")
 KINDS = ("free-floating", "articulated")
 SPLITS = ("train", "val")
+REAL_SOURCE = "partnet-mobility"  # the run-directory name of ../shared/partnet-mobility
 
 
 @dataclass
@@ -83,22 +88,30 @@ def category_errors(cfg: PaperTableConfig, policy: str) -> dict[str, dict[str, d
     return out
 
 
-def run_dir(cfg: PaperTableConfig, policy: str, task: str) -> Path:
-    return Path(cfg.results) / "runs" / f"{policy}__{task}__val__procedural__{cfg.obs}"
+def run_dir(cfg: PaperTableConfig, policy: str, task: str, source: str = "procedural") -> Path:
+    return Path(cfg.results) / "runs" / f"{policy}__{task}__val__{source}__{cfg.obs}"
+
+
+def _read_summary(directory: Path) -> dict | None:
+    import json
+
+    summary_file = directory / "summary.json"
+    return json.loads(summary_file.read_text()) if summary_file.is_file() else None
+
+
+def real_success(cfg: PaperTableConfig, policy: str, task: str) -> dict | None:
+    """The run's summary on the real objects, or None (never run from here: it needs their folder)."""
+    return _read_summary(run_dir(cfg, policy, task, REAL_SOURCE))
 
 
 def success(cfg: PaperTableConfig, policy: str, task: str) -> dict | None:
     """The run's summary (running it first when missing and allowed), or None."""
-    import json
-
     from wpbench.evaluation.runner import RunConfig, run_benchmark
 
     directory = run_dir(cfg, policy, task)
-    summary_file = directory / "summary.json"
-    if summary_file.is_file():
-        summary = json.loads(summary_file.read_text())
-        if summary.get("episodes", 0) >= cfg.episodes or not cfg.run_missing:
-            return summary
+    summary = _read_summary(directory)
+    if summary is not None and (summary.get("episodes", 0) >= cfg.episodes or not cfg.run_missing):
+        return summary
     if not cfg.run_missing:
         return None
     return run_benchmark(RunConfig(policy=policy, task=task, split="val", episodes=cfg.episodes, obs=cfg.obs,
@@ -109,7 +122,25 @@ def _fmt(value: float, scale: float = 1.0, digits: int = 1) -> str:
     return "n/a" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value * scale:.{digits}f}"
 
 
-def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: dict | None = None) -> str:
+def _success_table(cfg: PaperTableConfig, title: str, successes: dict) -> list[str]:
+    lines = ["", title, "", "| policy | " + " | ".join(TASKS) + " |", "|" + "---|" * (1 + len(TASKS))]
+    for policy in cfg.policies:
+        cells = []
+        for task in TASKS:
+            s = successes.get((policy, task))
+            if s is None:
+                cells.append("not run")
+            else:
+                lo, hi = s["success_ci95"]
+                cells.append(f"{100 * s['success_rate']:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}] (n={s['episodes']})")
+        lines.append(f"| {policy} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: dict | None = None,
+           real_successes: dict | None = None) -> str:
+    """``successes`` / ``real_successes``: {(policy, task): summary} on the built-in val furniture /
+    the real objects (that section only when there is at least one such run)."""
     by_category = by_category or {}
     lines = ["# WeightedPose, paper Table 1 layout (wpbench)", "",
              "Made by `wpbench paper-table`. Pose errors are on the generated data set "
@@ -140,23 +171,15 @@ def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: di
                 continue
             cells = [f"{_fmt(per[c]['rot_deg'])} / {_fmt(per[c]['trans_m'], 100)}" if c in per else "-" for c in categories]
             lines.append(f"| {policy} | {kind} | " + " | ".join(cells) + " |")
-    lines += ["", f"## Simulated success rate (val split, {cfg.obs})", "",
-              "| policy | " + " | ".join(TASKS) + " |", "|" + "---|" * (1 + len(TASKS))]
-    for policy in cfg.policies:
-        cells = []
-        for task in TASKS:
-            s = successes.get((policy, task))
-            if s is None:
-                cells.append("not run")
-            else:
-                lo, hi = s["success_ci95"]
-                cells.append(f"{100 * s['success_rate']:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}] (n={s['episodes']})")
-        lines.append(f"| {policy} | " + " | ".join(cells) + " |")
+    lines += _success_table(cfg, f"## Simulated success rate (val split, {cfg.obs})", successes)
+    if real_successes:
+        lines += _success_table(cfg, f"## Simulated success rate on real PartNet-Mobility objects ({cfg.obs}; "
+                                     "trained on built-in furniture only)", real_successes)
     return "\n".join(lines) + "\n"
 
 
 def make_paper_table(cfg: PaperTableConfig, out: Path | None = None) -> Path:
-    errors, successes, by_category = {}, {}, {}
+    errors, successes, by_category, real_successes = {}, {}, {}, {}
     for policy in cfg.policies:
         try:
             errors[policy] = pose_errors(cfg, policy)
@@ -168,7 +191,10 @@ def make_paper_table(cfg: PaperTableConfig, out: Path | None = None) -> Path:
             summary = success(cfg, policy, task)
             if summary is not None:
                 successes[(policy, task)] = summary
+            real = real_success(cfg, policy, task)
+            if real is not None:
+                real_successes[(policy, task)] = real
     out = Path(out) if out is not None else Path(cfg.results) / "paper-table.md"
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(render(cfg, errors, successes, by_category))
+    out.write_text(render(cfg, errors, successes, by_category, real_successes))
     return out
