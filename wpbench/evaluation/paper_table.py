@@ -1,7 +1,7 @@
 """``results/paper-table.md``: the layout of the WeightedPose paper's Table 1,
 plus what the simulator says.
 
-Two tables, one command (``wpbench paper-table``):
+Four tables, one command (``wpbench paper-table``):
 
 1. Pose errors on the generated data set (no simulation): for each policy, the
    train and val splits, free-floating and articulated samples, mean rotation
