@@ -170,3 +170,42 @@ def test_bad_input_gets_a_clear_error(action, anchor, match):
     model = small_model("taxpose", dtype=torch.float32)
     with pytest.raises(ValueError, match=match):
         model(action, anchor)
+
+
+def _goal_flow_reading_the_anchor_extent() -> torch.nn.Module:
+    from models_helpers import small_overrides
+
+    torch.manual_seed(0)
+    model = build_model("goalflow", **small_overrides("goalflow", anchor_extent=True)).double().eval()
+    # The heads start at zero output; give them weights so the extent inputs matter.
+    for head in (model.flow_head, model.affine_head):
+        torch.nn.init.normal_(head[-1].weight, std=0.1)
+    return model
+
+
+@settings(max_examples=5, deadline=None)
+@given(shift=st.tuples(*[st.floats(-3.0, 3.0)] * 3), yaw=st.floats(-math.pi, math.pi))
+def test_goal_flow_with_the_anchor_extent_stays_equivariant(shift, yaw):
+    model = _goal_flow_reading_the_anchor_extent()
+    data = scene(batch=1, dtype=torch.float64)
+    t = torch.tensor(shift, dtype=torch.float64)
+    A = yaw_rotations(torch.tensor([yaw], dtype=torch.float64))
+    R = A[:, :3, :3]
+    with torch.no_grad():
+        T = model(data["action"], data["anchor"]).transform
+        T_moved = model(data["action"] + t, data["anchor"] + t).transform
+        T_turned = model(data["action"] @ R.transpose(1, 2), data["anchor"] @ R.transpose(1, 2)).transform
+    assert torch.allclose(se3.apply(T_moved, data["action"] + t), se3.apply(T, data["action"]) + t, atol=1e-8)
+    assert torch.allclose(T_turned, A @ T @ A.transpose(1, 2), atol=1e-9)
+
+
+def test_the_anchor_extent_reaches_the_flow():
+    model = _goal_flow_reading_the_anchor_extent()
+    data = scene(batch=1, dtype=torch.float64)
+    with torch.no_grad():
+        before = model(data["action"], data["anchor"]).diagnostics["flow"]
+        # Cut the six extent inputs of both flow heads: the flow must change.
+        model.flow_head[0].weight[:, -6:] = 0.0
+        model.affine_head[0].weight[:, -6:] = 0.0
+        after = model(data["action"], data["anchor"]).diagnostics["flow"]
+    assert not torch.allclose(before, after, atol=1e-6)

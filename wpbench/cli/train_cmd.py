@@ -20,7 +20,15 @@ def train(
     batch_size: int = typer.Option(8, min=1, help="Samples per optimiser step."),
     steps_per_epoch: int = typer.Option(40, min=1, help="Optimiser steps between validation + checkpoint."),
     max_steps: int = typer.Option(None, min=1, help="Stop after this many optimiser steps (whatever the budget)."),
-    learning_rate: float = typer.Option(None, help="Adam learning rate [default: 1e-3 baselines, 3e-4 WeightedPose]."),
+    learning_rate: float = typer.Option(None, help="Adam learning rate [default: 1e-3 baselines, 1e-4 WeightedPose]."),
+    mixing_warmup: float = typer.Option(None, min=0.0, max=0.99,
+                                        help="WeightedPose: fraction of the budget training the mixing head alone, "
+                                             "branches frozen [default: 0.25]."),
+    model_option: list[str] = typer.Option(
+        None, "--model-option",
+        help="KEY=VALUE change of the model config (baselines; WeightedPose takes its branches' configs). "
+             "Dotted keys reach nested configs, values are JSON: --model-option anchor_extent=true "
+             "--model-option encoder.k=20."),
     lr_schedule: str = typer.Option("cosine", help="constant, or cosine (decay to 5% over the time budget)."),
     num_action_points: int = typer.Option(128, min=8, help="Action points per cloud in training (random subset)."),
     num_anchor_points: int = typer.Option(512, min=8, help="Anchor points per cloud in training (random subset)."),
@@ -55,11 +63,14 @@ def train(
     from wpbench.training.loop import train as run_training
 
     try:
+        overrides = parse_model_options(model_option or [])
         config = TrainConfig(
             policy=policy, data=data, out=out, weights_root=weights_root, minutes=minutes, max_steps=max_steps,
-            steps_per_epoch=steps_per_epoch, batch_size=batch_size, learning_rate=learning_rate, lr_schedule=lr_schedule,
+            steps_per_epoch=steps_per_epoch, batch_size=batch_size, learning_rate=learning_rate, mixing_warmup=mixing_warmup,
+            lr_schedule=lr_schedule,
             num_action_points=num_action_points, num_anchor_points=num_anchor_points, augment_yaw=augment, augment_mirror=mirror,
             val_per_kind=val_per_kind, final_val_per_kind=final_val_per_kind, seed=seed, threads=threads,
+            model_overrides=overrides,
         )
         metrics = run_training(config, echo=typer.echo, restart=restart)
     except (ValueError, FileNotFoundError) as err:
@@ -70,6 +81,27 @@ def train(
                    f"point {values['point_m'] * 100:.2f} cm (n={values['n']})")
     typer.echo(f"weights: {config.out}/model.pt ({metrics['train_wall_s'] / 60:.1f} min, "
                f"peak RSS {metrics['peak_rss_mib']:.0f} MiB)")
+
+
+def parse_model_options(options: list[str]) -> dict:
+    """["encoder.k=20", "anchor_extent=true"] -> {"encoder": {"k": 20}, "anchor_extent": True}."""
+    import json
+
+    overrides: dict = {}
+    for option in options:
+        key, sep, text = option.partition("=")
+        if not sep or not key:
+            raise ValueError(f"--model-option {option!r} is not KEY=VALUE (for example anchor_extent=true)")
+        try:
+            value = json.loads(text)
+        except json.JSONDecodeError as err:
+            raise ValueError(f"--model-option {option!r}: the value must be JSON (true, 20, [32, 64], \"x\"): {err}") from err
+        *parents, leaf = key.split(".")
+        node = overrides
+        for parent in parents:
+            node = node.setdefault(parent, {})
+        node[leaf] = value
+    return overrides
 
 
 _single = typer.Typer(add_completion=False)

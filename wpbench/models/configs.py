@@ -108,6 +108,11 @@ class GoalFlowConfig:
         (``wpbench.models.heading_frame``): exact yaw equivariance.
     affine_flow: add a per-sample affine flow ``M p + b`` (from the global
         feature) to the per-point flow: a rigid motion's flow is exactly that.
+    anchor_extent: give the flow heads the anchor's bounding box (its min and max
+        corner, relative to the action centroid, in the heading frame) next to
+        the max-pooled feature: how far a drawer slides or where a hinge sits
+        depends on the furniture's size, which max-pooled point features
+        measure poorly (see ``GoalFlow``).
     """
 
     encoder: DGCNNConfig = field(default_factory=DGCNNConfig)
@@ -116,6 +121,7 @@ class GoalFlowConfig:
     position_scale: float = 10.0
     heading_frame: bool = True
     affine_flow: bool = True
+    anchor_extent: bool = False
 
     def __post_init__(self) -> None:
         if self.mixing_weight not in ("per_sample", "per_point"):

@@ -29,6 +29,8 @@ class TrainConfig:
     val_per_kind: validation samples per kind checked after every epoch;
         final_val_per_kind: for the final metrics.
     learning_rate: None = the policy's default (``specs``).
+    mixing_warmup: WeightedPose only: fraction of the budget that trains the mixing
+        head alone (``wpbench.training.warmup``); None = the policy's default.
     lr_schedule: "constant", or "cosine": decays from the learning rate to 5% of it
         over the time budget (time-based, since the budget is in minutes, not steps).
     model_overrides: changes to the model's default config (baselines only;
@@ -44,6 +46,7 @@ class TrainConfig:
     steps_per_epoch: int = 40
     batch_size: int = 8
     learning_rate: float | None = None
+    mixing_warmup: float | None = None
     lr_schedule: str = "cosine"
     grad_clip: float = 1.0
     num_action_points: int = 128
@@ -68,6 +71,8 @@ class TrainConfig:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.lr_schedule not in ("constant", "cosine"):
             raise ValueError(f"lr_schedule must be 'constant' or 'cosine', got {self.lr_schedule!r}")
+        if self.mixing_warmup is not None and not 0.0 <= self.mixing_warmup < 1.0:
+            raise ValueError(f"mixing_warmup must be in [0, 1), got {self.mixing_warmup}")
         if self.max_steps is not None and self.max_steps < 1:
             raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
 

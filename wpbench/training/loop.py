@@ -28,6 +28,7 @@ from wpbench.training.checkpoint import load_checkpoint, save_checkpoint
 from wpbench.training.config import TrainConfig
 from wpbench.training.evaluate import evaluate, mean_point_error
 from wpbench.training.specs import PolicySpec, get_spec
+from wpbench.training.warmup import in_warmup, set_phase
 
 
 def peak_rss_mib() -> float:
@@ -44,6 +45,11 @@ def build_policy_model(spec: PolicySpec, config: TrainConfig) -> tuple[torch.nn.
 
     if not spec.starts_from:
         return build_model(spec.model, **config.model_overrides), {"from": "scratch"}
+    if config.model_overrides:
+        raise ValueError(
+            f"{spec.name} takes its branch configs from the trained {' and '.join(spec.starts_from)}; "
+            f"model options {config.model_overrides} belong to their training (wpbench train --policy gf --model-option ...)"
+        )
     from wpbench.models.configs import WeightedPoseConfig
     from wpbench.models.weightedpose import WeightedPose
 
@@ -87,6 +93,15 @@ def scheduled_lr(base: float, schedule: str, elapsed: float, budget: float) -> f
     return base * (0.05 + 0.95 * 0.5 * (1.0 + math.cos(math.pi * progress)))
 
 
+def phase_lr(spec: PolicySpec, base: float, schedule: str, elapsed: float, budget: float, warmup: float) -> float:
+    """The learning rate at ``elapsed``: the mixing head's own during the warm-up, then
+    ``base`` on its schedule over what is left of the budget."""
+    if in_warmup(elapsed, budget, warmup):
+        return spec.mixing_learning_rate
+    start = warmup * budget
+    return scheduled_lr(base, schedule, elapsed - start, budget - start)
+
+
 def _val_row(results: dict[str, dict[str, float]]) -> dict[str, float]:
     row: dict[str, float] = {}
     for kind, values in results.items():
@@ -110,6 +125,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
     data_hashes = {"train": train_set.content_hash, "val": val_set.content_hash}
     model, origin = build_policy_model(spec, config)
     lr = config.learning_rate if config.learning_rate is not None else spec.learning_rate
+    warmup = config.mixing_warmup if config.mixing_warmup is not None else spec.mixing_warmup
     optimizer = torch.optim.Adam(model.parameters(), lr=lr)
     generator = torch.Generator().manual_seed(config.seed)
 
@@ -129,7 +145,8 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
     budget = config.minutes * 60.0
     batches = shuffled_batches(len(train_set), config.batch_size, generator)
     echo(f"{config.policy}: {len(train_set)} train / {len(val_set)} val samples ({', '.join(spec.kinds)}), "
-         f"{sum(p.numel() for p in model.parameters())} parameters, lr {lr}, budget {config.minutes} min")
+         f"{sum(p.numel() for p in model.parameters())} parameters, lr {lr}, budget {config.minutes} min"
+         + (f", the first {warmup:.0%} training the mixing head alone" if warmup > 0 else ""))
 
     def finished() -> bool:
         return (config.max_steps is not None and step >= config.max_steps) or elapsed >= budget
@@ -141,11 +158,16 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
         if rows and elapsed + 0.5 * last_epoch_seconds > budget:
             break
         started = time.perf_counter()
+        # The phase is chosen per epoch from the elapsed time, so a resumed run picks it up.
+        mixing_only = in_warmup(elapsed, budget, warmup)
+        if warmup > 0:
+            set_phase(model, mixing_only)
         sums: dict[str, float] = {}
         steps_done = skipped = 0
         while steps_done < config.steps_per_epoch and not (config.max_steps is not None and step >= config.max_steps):
             for group in optimizer.param_groups:
-                group["lr"] = scheduled_lr(lr, config.lr_schedule, elapsed + time.perf_counter() - started, budget)
+                group["lr"] = phase_lr(spec, lr, config.lr_schedule, elapsed + time.perf_counter() - started,
+                                       budget, warmup)
             batch = prepare(make_batch(train_set, next(batches)), config.num_action_points,
                             config.num_anchor_points, config.augment_yaw, generator,
                             config.augment_mirror)
@@ -172,7 +194,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
         epoch += 1
         good = max(steps_done - skipped, 1)
         row = {"epoch": epoch, "step": step, "elapsed_s": round(elapsed, 1), "skipped_steps": skipped,
-               "lr": optimizer.param_groups[0]["lr"],
+               "lr": optimizer.param_groups[0]["lr"], "mixing_only": int(mixing_only),
                **{k: v / good for k, v in sums.items()}, **_val_row(results)}
         rows.append(row)
         save_checkpoint(out, {"policy": config.policy, "data": data_hashes, "model": model.state_dict(),

@@ -20,6 +20,10 @@ class PolicySpec:
     kinds: tuple[str, ...]           # data kinds it trains and validates on
     starts_from: tuple[str, ...] = ()  # policies whose trained weights initialise it
     learning_rate: float = 1e-3
+    # WeightedPose: fraction of the time budget that trains only the mixing-weight head
+    # (branches frozen), at ``mixing_learning_rate``; see ``wpbench.training.warmup``.
+    mixing_warmup: float = 0.0
+    mixing_learning_rate: float = 1e-3
 
 
 POLICY_SPECS: dict[str, PolicySpec] = {
@@ -27,9 +31,9 @@ POLICY_SPECS: dict[str, PolicySpec] = {
     for spec in (
         PolicySpec("gf", "goalflow", "gf", (ARTICULATED,)),
         PolicySpec("tp", "taxpose", "tp", (FREE,)),
-        PolicySpec("wp-og", "weightedpose", "wp-og", (ARTICULATED, FREE), ("gf", "tp"), 3e-4),
-        PolicySpec("wp-postsvd", "weightedpose", "wp-postsvd", (ARTICULATED, FREE), ("gf", "tp"), 3e-4),
-        PolicySpec("wp-postsvd-t", "weightedpose", "wp-postsvd-t", (ARTICULATED, FREE), ("gf", "tp"), 3e-4),
+        PolicySpec("wp-og", "weightedpose", "wp-og", (ARTICULATED, FREE), ("gf", "tp"), 1e-4, 0.25),
+        PolicySpec("wp-postsvd", "weightedpose", "wp-postsvd", (ARTICULATED, FREE), ("gf", "tp"), 1e-4, 0.25),
+        PolicySpec("wp-postsvd-t", "weightedpose", "wp-postsvd-t", (ARTICULATED, FREE), ("gf", "tp"), 1e-4, 0.25),
     )
 }
 WEIGHTED_POSE_VARIANTS = tuple(name for name, spec in POLICY_SPECS.items() if spec.model == "weightedpose")
