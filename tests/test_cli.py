@@ -246,3 +246,29 @@ def test_run_writes_results_resumes_and_never_overwrites(wpbench_exe, tmp_path):
     after = (out / "episodes.jsonl").read_text().splitlines()
     assert after[:2] == lines and len(after) == 3
     assert json.loads((out / "summary.json").read_text())["episodes"] == 3
+
+
+def test_model_options_become_nested_overrides_and_bad_ones_say_how():
+    from wpbench.cli.train_cmd import parse_model_options
+
+    assert parse_model_options(["anchor_extent=true", "encoder.k=20", "encoder.edge_channels=[16, 32]"]) == {
+        "anchor_extent": True, "encoder": {"k": 20, "edge_channels": [16, 32]}}
+    with pytest.raises(ValueError, match="KEY=VALUE"):
+        parse_model_options(["anchor_extent"])
+    with pytest.raises(ValueError, match="must be JSON"):
+        parse_model_options(["anchor_extent=yes please"])
+
+
+def test_train_passes_model_options_to_the_model_config(wpbench_exe, tmp_path):
+    """A typo in an option is refused with the valid names before anything is written."""
+    from wpbench.data.synthetic import write_synthetic_split
+
+    write_synthetic_split(tmp_path / "data", "train", per_kind=2, num_action_points=32, num_anchor_points=48)
+    write_synthetic_split(tmp_path / "data", "val", per_kind=2, num_action_points=32, num_anchor_points=48, seed=1)
+    out = tmp_path / "gf"
+    result = subprocess.run([str(wpbench_exe), "train", "--policy", "gf", "--data", str(tmp_path / "data"),
+                             "--out", str(out), "--model-option", "anchor_extnt=true"],
+                            capture_output=True, text=True)
+    assert result.returncode == 2
+    assert "anchor_extnt" in result.stderr and "anchor_extent" in result.stderr
+    assert not (out / "model.pt").exists()

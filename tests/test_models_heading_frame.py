@@ -49,3 +49,44 @@ def test_to_and_from_are_inverse():
 def test_bad_shapes_raise():
     with pytest.raises(ValueError, match=r"\(B, N, 3\)"):
         heading_rotation(torch.zeros(5, 3), torch.zeros(1, 5, 3))
+
+
+def _panel(yaw: float, centre_xy=(0.0, 0.0), width=0.6, depth_offset=0.2):
+    """A vertical panel (a door seen from the front) whose outward normal is at ``yaw``,
+    ``depth_offset`` in front of a box anchor, and shifted sideways by ``centre_xy``."""
+    normal = torch.tensor([math.cos(yaw), math.sin(yaw)], dtype=torch.float64)
+    along = torch.tensor([-math.sin(yaw), math.cos(yaw)], dtype=torch.float64)
+    s = torch.linspace(-width / 2, width / 2, 9, dtype=torch.float64)
+    z = torch.linspace(0.0, 1.0, 5, dtype=torch.float64)
+    ss, zz = torch.meshgrid(s, z, indexing="ij")
+    base = torch.tensor(centre_xy, dtype=torch.float64) + depth_offset * normal
+    xy = base + ss.reshape(-1, 1) * along
+    action = torch.cat([xy, zz.reshape(-1, 1)], dim=1)[None]
+    anchor = torch.zeros(1, 4, 3, dtype=torch.float64)
+    anchor[0, :, 2] = torch.tensor([0.0, 0.3, 0.6, 0.9], dtype=torch.float64)
+    return action, anchor, normal
+
+
+@settings(max_examples=25, deadline=None)
+@given(yaw=st.floats(-math.pi, math.pi), sideways=st.floats(-0.25, 0.25))
+def test_the_action_panel_heading_is_the_panels_outward_normal(yaw, sideways):
+    """Even when the panel sits far to one side (the centroid direction is then tens of degrees off)."""
+    along = (-math.sin(yaw) * sideways, math.cos(yaw) * sideways)
+    action, anchor, normal = _panel(yaw, centre_xy=along)
+    R = heading_rotation(action, anchor, source="action_panel")
+    mapped = R[0, :2, :2] @ normal
+    assert torch.allclose(mapped, torch.tensor([1.0, 0.0], dtype=torch.float64), atol=1e-9)
+    assert torch.isclose(torch.linalg.det(R[0]), torch.tensor(1.0, dtype=torch.float64))
+
+
+def test_an_unknown_heading_source_is_refused():
+    action, anchor = _clouds((0.3, 0.1))
+    with pytest.raises(ValueError, match="centroids"):
+        heading_rotation(action, anchor, source="camera")
+
+
+def test_goal_flow_config_refuses_an_unknown_heading_source():
+    from wpbench.models.configs import GoalFlowConfig
+
+    with pytest.raises(ValueError, match="action_panel"):
+        GoalFlowConfig(heading_source="camera")

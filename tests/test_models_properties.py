@@ -102,7 +102,10 @@ def test_translation_equivariance(name, dynamic_graph, shift):
 @given(yaw=st.floats(-math.pi, math.pi))
 def test_yaw_equivariance(name, yaw):
     """Turning the whole scene by A about world z turns the prediction: T' = A T A^-1 (heading frame)."""
-    model = small_model(name)
+    _assert_yaw_equivariant(small_model(name), yaw)
+
+
+def _assert_yaw_equivariant(model: torch.nn.Module, yaw: float) -> None:
     data = scene(batch=1, dtype=torch.float64)
     A = yaw_rotations(torch.tensor([yaw], dtype=torch.float64))
     R = A[:, :3, :3]
@@ -189,14 +192,11 @@ def test_goal_flow_with_the_anchor_extent_stays_equivariant(shift, yaw):
     model = _goal_flow_reading_the_anchor_extent()
     data = scene(batch=1, dtype=torch.float64)
     t = torch.tensor(shift, dtype=torch.float64)
-    A = yaw_rotations(torch.tensor([yaw], dtype=torch.float64))
-    R = A[:, :3, :3]
     with torch.no_grad():
         T = model(data["action"], data["anchor"]).transform
         T_moved = model(data["action"] + t, data["anchor"] + t).transform
-        T_turned = model(data["action"] @ R.transpose(1, 2), data["anchor"] @ R.transpose(1, 2)).transform
     assert torch.allclose(se3.apply(T_moved, data["action"] + t), se3.apply(T, data["action"]) + t, atol=1e-8)
-    assert torch.allclose(T_turned, A @ T @ A.transpose(1, 2), atol=1e-9)
+    _assert_yaw_equivariant(model, yaw)
 
 
 def test_the_anchor_extent_reaches_the_flow():
@@ -209,3 +209,14 @@ def test_the_anchor_extent_reaches_the_flow():
         model.affine_head[0].weight[:, -6:] = 0.0
         after = model(data["action"], data["anchor"]).diagnostics["flow"]
     assert not torch.allclose(before, after, atol=1e-6)
+
+
+@settings(max_examples=5, deadline=None)
+@given(yaw=st.floats(-math.pi, math.pi))
+def test_goal_flow_in_the_action_panel_heading_is_yaw_equivariant(yaw):
+    from models_helpers import small_overrides
+
+    torch.manual_seed(0)
+    model = build_model("goalflow", **small_overrides("goalflow", heading_source="action_panel")).double().eval()
+    torch.nn.init.normal_(model.flow_head[-1].weight, std=0.1)
+    _assert_yaw_equivariant(model, yaw)

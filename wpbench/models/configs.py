@@ -108,6 +108,9 @@ class GoalFlowConfig:
         (``wpbench.models.heading_frame``): exact yaw equivariance.
     affine_flow: add a per-sample affine flow ``M p + b`` (from the global
         feature) to the per-point flow: a rigid motion's flow is exactly that.
+    heading_source: the direction the heading frame puts on +x: "centroids"
+        (anchor -> action) or "action_panel" (the normal of the action's
+        footprint; see ``wpbench.models.heading_frame``).
     anchor_extent: give the flow heads the anchor's bounding box (its min and max
         corner, relative to the action centroid, in the heading frame) next to
         the max-pooled feature: how far a drawer slides or where a hinge sits
@@ -122,8 +125,11 @@ class GoalFlowConfig:
     heading_frame: bool = True
     affine_flow: bool = True
     anchor_extent: bool = False
+    heading_source: str = "centroids"
 
     def __post_init__(self) -> None:
+        if self.heading_source not in ("centroids", "action_panel"):
+            raise ValueError(f"heading_source must be 'centroids' or 'action_panel', got {self.heading_source!r}")
         if self.mixing_weight not in ("per_sample", "per_point"):
             raise ValueError(f"mixing_weight must be 'per_sample' or 'per_point', got {self.mixing_weight!r}")
         if not self.position_scale > 0:

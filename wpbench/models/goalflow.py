@@ -62,7 +62,7 @@ class GoalFlow(nn.Module):
         check_point_clouds(action, anchor)
         if not self.config.heading_frame:
             return self._flow_terms_in_frame(action, anchor)
-        rotation = heading_rotation(action, anchor)
+        rotation = heading_rotation(action, anchor, self.config.heading_source)
         terms = self._flow_terms_in_frame(to_heading_frame(rotation, action), to_heading_frame(rotation, anchor))
         terms["flow"] = from_heading_frame(rotation, terms["flow"])
         return terms
