@@ -19,6 +19,9 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 MixingWeightMode = Literal["per_sample", "per_point"]
+# Directions the heading frame can put on +x (``wpbench.models.heading_frame``).
+HeadingSource = Literal["centroids", "action_panel"]
+HEADING_SOURCES: tuple[str, ...] = ("centroids", "action_panel")
 
 
 @dataclass(frozen=True)
@@ -125,11 +128,11 @@ class GoalFlowConfig:
     heading_frame: bool = True
     affine_flow: bool = True
     anchor_extent: bool = False
-    heading_source: str = "centroids"
+    heading_source: HeadingSource = "centroids"
 
     def __post_init__(self) -> None:
-        if self.heading_source not in ("centroids", "action_panel"):
-            raise ValueError(f"heading_source must be 'centroids' or 'action_panel', got {self.heading_source!r}")
+        if self.heading_source not in HEADING_SOURCES:
+            raise ValueError(f"heading_source must be one of {HEADING_SOURCES}, got {self.heading_source!r}")
         if self.mixing_weight not in ("per_sample", "per_point"):
             raise ValueError(f"mixing_weight must be 'per_sample' or 'per_point', got {self.mixing_weight!r}")
         if not self.position_scale > 0:

@@ -29,12 +29,9 @@ is mapped with ``points @ R.transpose(1, 2)``.
 
 from __future__ import annotations
 
-from typing import Literal
-
 import torch
 
-HeadingSource = Literal["centroids", "action_panel"]
-HEADING_SOURCES: tuple[str, ...] = ("centroids", "action_panel")
+from wpbench.models.configs import HEADING_SOURCES, HeadingSource
 
 # Below this horizontal offset (m) the heading is undefined: keep the world frame.
 MIN_OFFSET = 1e-6
