@@ -272,3 +272,32 @@ def test_train_passes_model_options_to_the_model_config(wpbench_exe, tmp_path):
     assert result.returncode == 2
     assert "anchor_extnt" in result.stderr and "anchor_extent" in result.stderr
     assert not (out / "model.pt").exists()
+
+
+def test_run_weights_root_loads_the_experiment_and_writes_beside_it(runner, monkeypatch, tmp_path, repo_root):
+    """--weights-root: the policy loads from that folder, the run goes to <root>/runs/."""
+    import shutil
+
+    import wpbench.evaluation.runner as runner_module
+    from policies.registry import make_policy
+
+    root = tmp_path / "experiment"
+    shutil.copytree(repo_root / "policies" / "weights" / "gf", root / "gf", ignore=shutil.ignore_patterns("checkpoint.pt"))
+    seen = []
+
+    def fake_run_benchmark(cfg, **_):
+        seen.append(cfg)
+        raise ValueError("stopped by the test")
+
+    monkeypatch.setattr(runner_module, "run_benchmark", fake_run_benchmark)
+    result = runner.invoke(cli.app, ["run", "--policy", "gf", "--task", "open-door", "--weights-root", str(root)])
+    assert result.exit_code == 2 and "stopped by the test" in result.output
+    (cfg,) = seen
+    assert cfg.out == root / "runs" / "gf__open-door__val__procedural__camera"
+    assert make_policy(cfg.policy, **cfg.policy_kwargs).config.weights_dir == root / "gf"
+
+    refused = runner.invoke(cli.app, ["run", "--policy", "gt", "--weights-root", str(root)])
+    assert refused.exit_code == 2 and "applies to the trained policies" in refused.output
+    missing = runner.invoke(cli.app, ["run", "--policy", "gf", "--weights-root", str(tmp_path / "nowhere")])
+    assert missing.exit_code == 2 and "wpbench train --policy NAME --weights-root" in missing.output
+    assert len(seen) == 1

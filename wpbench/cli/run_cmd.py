@@ -13,6 +13,14 @@ SPLITS = ("train", "val", "all")
 OBS_MODES = ("camera", "mesh")
 
 
+def _learned_policies() -> tuple[str, ...]:
+    """Policies that load trained weights (and so take --weights-root): the trainable ones,
+    ``wp`` (the best variant) and ``oracle`` (gf or tp by the true kind)."""
+    from wpbench.training.specs import POLICY_SPECS
+
+    return (*POLICY_SPECS, "wp", "oracle")
+
+
 def _policy_names() -> list[str]:
     from policies.registry import available_policies
 
@@ -33,6 +41,9 @@ def run(
     num_action_points: int = typer.Option(256, min=8, help="Action-object points per observation."),
     num_anchor_points: int = typer.Option(1024, min=8, help="Anchor-object points per observation."),
     progress: bool = typer.Option(True, help="Show a progress bar."),
+    weights_root: Path = typer.Option(
+        None, help="Load trained policies from this folder instead of policies/weights (an experiment's "
+                   "weights); the run then goes to <weights-root>/runs/ unless --out says otherwise."),
 ) -> None:
     """Run POLICY on TASK for N episodes: progress bar, summary table, episodes.jsonl and summary.json."""
     if policy == "list":
@@ -44,12 +55,25 @@ def run(
     check_choice("observation mode", obs, OBS_MODES)
     if assets != "procedural" and not Path(assets).is_dir():
         raise typer.BadParameter(f"--assets must be 'procedural' or an existing folder; {assets!r} is neither")
+    policy_kwargs = {}
+    if weights_root is not None:
+        if policy not in _learned_policies():
+            raise typer.BadParameter(f"--weights-root applies to the trained policies ({', '.join(_learned_policies())}); "
+                                     f"{policy!r} loads no weights")
+        if not weights_root.is_dir():
+            raise typer.BadParameter(f"--weights-root {weights_root} is not a folder; train into it with "
+                                     f"`wpbench train --policy NAME --weights-root {weights_root}`")
+        # A string, so that run.json records it as written.
+        policy_kwargs["weights_root"] = str(weights_root)
     from wpbench.evaluation.runner import RunConfig, run_benchmark
     from wpbench.evaluation.summary import format_summary_table
 
     cfg = RunConfig(policy=policy, task=task, split=split, episodes=episodes, seed=seed, assets=assets,
                     obs=obs, out=out, resume=resume, record=record, num_action_points=num_action_points,
-                    num_anchor_points=num_anchor_points)
+                    num_anchor_points=num_anchor_points, policy_kwargs=policy_kwargs)
+    if out is None and weights_root is not None:
+        # Keep an experiment's runs beside its weights, away from the shipped results/runs/.
+        cfg.out = weights_root / "runs" / cfg.default_out().name
     observer = None
     if record is not None:
         from wpbench.evaluation.recording import RerunRecorder
