@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 
@@ -92,3 +93,23 @@ def test_from_pretrained_per_point_keeps_a_fresh_mixing_head_and_warns():
         model = WeightedPose.from_pretrained(goalflow.state_dict(), taxpose.state_dict(), per_point)
     assert torch.equal(model.goalflow.flow_head[0].weight, goalflow.flow_head[0].weight)
     assert torch.count_nonzero(model.goalflow.mixing_head[-1].weight) == 0  # fresh: w starts at 0.5
+
+
+def test_a_saved_config_without_the_newer_fields_builds_the_network_it_was_trained_as():
+    """Weights saved before heading_source / anchor_extent existed were trained with the
+    centroid heading and no extent input, whatever today's defaults are."""
+    from wpbench.models.registry import saved_model_config
+
+    old_goalflow = {"affine_flow": True, "head_hidden": 16, "heading_frame": True, "position_scale": 10.0}
+    legacy = saved_model_config("goalflow", old_goalflow)
+    assert (legacy.heading_source, legacy.anchor_extent) == ("centroids", False)
+    assert legacy.head_hidden == 16
+    nested = saved_model_config("weightedpose", {"goalflow": old_goalflow, "w_mode": "per_sample"})
+    assert (nested.goalflow.heading_source, nested.goalflow.anchor_extent) == ("centroids", False)
+    # A saved value always wins, and a config saved with every field is rebuilt exactly.
+    assert saved_model_config("goalflow", {"heading_source": "action_panel"}).heading_source == "action_panel"
+    today = model_config("goalflow")
+    assert saved_model_config("goalflow", dataclasses.asdict(today)) == today
+    # The legacy network has no extent inputs: its flow head is 6 inputs narrower.
+    with_extent = dataclasses.replace(legacy, anchor_extent=True)
+    assert GoalFlow(with_extent).flow_head[0].in_features - GoalFlow(legacy).flow_head[0].in_features == 6

@@ -111,14 +111,16 @@ class GoalFlowConfig:
         (``wpbench.models.heading_frame``): exact yaw equivariance.
     affine_flow: add a per-sample affine flow ``M p + b`` (from the global
         feature) to the per-point flow: a rigid motion's flow is exactly that.
-    heading_source: the direction the heading frame puts on +x: "centroids"
-        (anchor -> action) or "action_panel" (the normal of the action's
-        footprint; see ``wpbench.models.heading_frame``).
+    heading_source: the direction the heading frame puts on +x: "action_panel"
+        (the normal of the action's footprint, the default) or "centroids"
+        (anchor -> action); see ``wpbench.models.heading_frame``.
     anchor_extent: give the flow heads the anchor's bounding box (its min and max
         corner, relative to the action centroid, in the heading frame) next to
         the max-pooled feature: how far a drawer slides or where a hinge sits
         depends on the furniture's size, which max-pooled point features
         measure poorly (see ``GoalFlow``).
+    The two defaults changed (``GOALFLOW_FIELDS_BEFORE_DEFAULT_CHANGE``); the
+    comparison behind them is ``results/experiments/README.md``.
     """
 
     encoder: DGCNNConfig = field(default_factory=DGCNNConfig)
@@ -127,8 +129,8 @@ class GoalFlowConfig:
     position_scale: float = 10.0
     heading_frame: bool = True
     affine_flow: bool = True
-    anchor_extent: bool = False
-    heading_source: HeadingSource = "centroids"
+    anchor_extent: bool = True
+    heading_source: HeadingSource = "action_panel"
 
     def __post_init__(self) -> None:
         if self.heading_source not in HEADING_SOURCES:
@@ -142,6 +144,12 @@ class GoalFlowConfig:
     def reference(cls) -> GoalFlowConfig:
         """Goal Flow with the reference DGCNN (512-dim embeddings)."""
         return cls(encoder=DGCNNConfig.reference(), head_hidden=256)
+
+
+# Values the fields above had before their defaults changed. A model saved before
+# the change has no such key in its config.json and was trained with this value,
+# not with today's default (``wpbench.models.registry.saved_model_config``).
+GOALFLOW_FIELDS_BEFORE_DEFAULT_CHANGE: dict[str, Any] = {"anchor_extent": False, "heading_source": "centroids"}
 
 
 @dataclass(frozen=True)

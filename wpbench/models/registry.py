@@ -9,7 +9,15 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from wpbench.models.configs import GoalFlowConfig, TaxPoseConfig, WeightedPoseConfig, apply_overrides
+import dataclasses
+
+from wpbench.models.configs import (
+    GOALFLOW_FIELDS_BEFORE_DEFAULT_CHANGE,
+    GoalFlowConfig,
+    TaxPoseConfig,
+    WeightedPoseConfig,
+    apply_overrides,
+)
 
 MODEL_CONFIGS: dict[str, type] = {
     "taxpose": TaxPoseConfig,
@@ -40,6 +48,24 @@ def model_config(name: str, config: Any | None = None, **overrides: Any) -> Any:
     if not isinstance(base, MODEL_CONFIGS[name]):
         raise ValueError(f"model {name!r} takes a {MODEL_CONFIGS[name].__name__}, got {type(base).__name__}")
     return apply_overrides(base, overrides)
+
+
+def saved_model_config(name: str, saved: dict[str, Any]) -> Any:
+    """The config of a saved model (the ``model_config`` dict of its config.json).
+
+    A field the saved dict lacks takes the value it had when the model was trained:
+    today's default, except for the Goal Flow fields whose default changed since
+    (``GOALFLOW_FIELDS_BEFORE_DEFAULT_CHANGE``), so that old weights still load as
+    the network they were trained as.
+    """
+    _check_name(name)
+    base = MODEL_CONFIGS[name]()
+    before = GOALFLOW_FIELDS_BEFORE_DEFAULT_CHANGE
+    if name == "goalflow":
+        base = dataclasses.replace(base, **before)
+    elif name == "weightedpose":
+        base = dataclasses.replace(base, goalflow=dataclasses.replace(base.goalflow, **before))
+    return apply_overrides(base, saved)
 
 
 def model_class(name: str) -> type:

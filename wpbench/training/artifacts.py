@@ -18,7 +18,7 @@ from typing import Any
 
 import torch
 
-from wpbench.models.registry import build_model, model_config
+from wpbench.models.registry import build_model, saved_model_config
 
 FORMAT_VERSION = 1
 MODEL_FILE, CONFIG_FILE, METRICS_FILE = "model.pt", "config.json", "metrics.json"
@@ -93,7 +93,7 @@ def load_state(weights_dir: Path, policy: str | None = None) -> dict[str, torch.
 
 def build_from_config(config: dict) -> torch.nn.Module:
     """A freshly initialised model as described by a ``config.json`` dict."""
-    cfg = model_config(config["model"], **config["model_config"])
+    cfg = saved_model_config(config["model"], config["model_config"])
     return build_model(config["model"], config=cfg)
 
 
