@@ -57,8 +57,9 @@ def run(
         raise typer.BadParameter(f"--assets must be 'procedural' or an existing folder; {assets!r} is neither")
     policy_kwargs = {}
     if weights_root is not None:
-        if policy not in _learned_policies():
-            raise typer.BadParameter(f"--weights-root applies to the trained policies ({', '.join(_learned_policies())}); "
+        learned = _learned_policies()
+        if policy not in learned:
+            raise typer.BadParameter(f"--weights-root applies to the trained policies ({', '.join(learned)}); "
                                      f"{policy!r} loads no weights")
         if not weights_root.is_dir():
             raise typer.BadParameter(f"--weights-root {weights_root} is not a folder; train into it with "

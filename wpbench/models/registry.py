@@ -6,10 +6,9 @@ model module it needs.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from typing import Any
-
-import dataclasses
 
 from wpbench.models.configs import (
     GOALFLOW_FIELDS_BEFORE_DEFAULT_CHANGE,
