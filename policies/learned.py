@@ -8,9 +8,11 @@ Weights come from ``wpbench train --policy NAME`` (``model.pt`` + ``config.json`
 The model was trained on random subsets of the stored clouds
 (``config.json``: ``num_action_points`` / ``num_anchor_points``), so each
 observation is subsampled the same way (fixed seed: the same observation gives
-the same answer). Per-point diagnostics are mapped back to every observed point
-by nearest kept neighbour (their displacement is copied), so a recorder can draw
-them over the full cloud.
+the same answer). ``subsets`` such subsets are answered in one batch and fused
+into one pose (``wpbench.models.subset_ensemble``; 1 = a single pass). The
+per-point diagnostics are those of the first subset, mapped back to every observed
+point by nearest kept neighbour (their displacement is copied), so a recorder can
+draw them over the full cloud.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from policies.base import Policy, PolicyConfig, PolicyOutput
+from wpbench.models.configs import DEFAULT_SUBSETS
 
 WEIGHTS_ROOT = Path(__file__).resolve().parent / "weights"
 BEST_FILE = "best.json"
@@ -41,12 +44,19 @@ _PER_POINT = {
 class LearnedPolicyConfig(PolicyConfig):
     """policy: the trained policy's name (its folder under ``weights_root``).
     weights_root: where trained policies live [default: ``policies/weights``].
-    seed: seed of the observation subsampling."""
+    seed: seed of the observation subsampling.
+    subsets: random subsets of the observation answered and fused into one pose (>= 1)."""
 
     name: ClassVar[str] = "learned"
     policy: str = "wp-postsvd-t"
     weights_root: Path | None = None
     seed: int = 0
+    subsets: int = DEFAULT_SUBSETS
+
+    def __post_init__(self) -> None:
+        if int(self.subsets) < 1:
+            raise ValueError(f"subsets must be >= 1, got {self.subsets}")
+        self.subsets = int(self.subsets)
 
     @property
     def weights_dir(self) -> Path:
@@ -78,7 +88,8 @@ class LearnedPolicy(Policy):
     def describe(self) -> dict[str, Any]:
         return {
             "policy": self.config.policy,
-            "config": {"policy": self.config.policy, "weights_dir": str(self.config.weights_dir), "seed": self.config.seed},
+            "config": {"policy": self.config.policy, "weights_dir": str(self.config.weights_dir), "seed": self.config.seed,
+                       "subsets": self.config.subsets},
             "model": self.model_config.get("model"),
             "loss_preset": self.model_config.get("loss_preset"),
             "model_hash": self.model_config.get("model_hash"),
@@ -95,12 +106,19 @@ class LearnedPolicy(Policy):
         torch = self._torch
         action = _cloud(obs, "action_points")
         anchor = _cloud(obs, "anchor_points")
+        from wpbench.models.subset_ensemble import fuse_goal_clouds
+
         rng = np.random.default_rng(self.config.seed)
-        ia = self._subsample(action, self.num_action_points, rng)
-        ib = self._subsample(anchor, self.num_anchor_points, rng)
+        # Clouds no larger than the model's input give one subset only: every subset would be the same.
+        count = self.config.subsets if (len(action) > self.num_action_points or len(anchor) > self.num_anchor_points) else 1
+        picks = [(self._subsample(action, self.num_action_points, rng), self._subsample(anchor, self.num_anchor_points, rng))
+                 for _ in range(count)]
         with torch.no_grad():
-            out = self.model(torch.from_numpy(action[ia])[None], torch.from_numpy(anchor[ib])[None])
-        transform = out.transform[0].double().numpy()
+            out = self.model(torch.from_numpy(np.stack([action[ia] for ia, _ in picks])),
+                             torch.from_numpy(np.stack([anchor[ib] for _, ib in picks])))
+            fused = fuse_goal_clouds(torch.from_numpy(action).double()[None], out.transform.double()[:, None])
+        transform = fused[0].numpy()
+        ia, ib = picks[0]
         clouds = {"action": (action, ia), "anchor": (anchor, ib)}
         diagnostics: dict[str, Any] = {}
         for key, value in out.diagnostics.items():

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from policies.base import Policy, PolicyConfig, PolicyOutput
+from wpbench.models.configs import DEFAULT_SUBSETS
 
 KIND_NAMES = {0: "articulated", 1: "free-floating", "articulated": "articulated", "free-floating": "free-floating"}
 
@@ -22,6 +23,7 @@ class OracleConfig(PolicyConfig):
     articulated_policy: str = "gf"
     free_policy: str = "tp"
     weights_root: Path | None = None
+    subsets: int = DEFAULT_SUBSETS  # passed to both experts (policies.learned)
 
 
 class OraclePolicy(Policy):
@@ -31,9 +33,10 @@ class OraclePolicy(Policy):
         from policies.learned import LearnedPolicy
 
         self.config = config or OracleConfig(**kwargs)
+        shared = {"weights_root": self.config.weights_root, "subsets": self.config.subsets}
         self.experts = {
-            "articulated": LearnedPolicy(policy=self.config.articulated_policy, weights_root=self.config.weights_root),
-            "free-floating": LearnedPolicy(policy=self.config.free_policy, weights_root=self.config.weights_root),
+            "articulated": LearnedPolicy(policy=self.config.articulated_policy, **shared),
+            "free-floating": LearnedPolicy(policy=self.config.free_policy, **shared),
         }
 
     def predict(self, obs: dict[str, Any], info: dict[str, Any] | None = None) -> PolicyOutput:

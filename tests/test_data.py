@@ -11,7 +11,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from wpbench.data.augment import random_yaw
+from wpbench.data.augment import random_scale, random_yaw
 from wpbench.data.config import ARTICULATED, FREE, GenerationConfig
 from wpbench.data.dataset import CrossPoseDataset
 from wpbench.data.generate import generate, symmetric_min_rotation
@@ -114,6 +114,36 @@ def test_yaw_augmentation_keeps_the_ground_truth_consistent(seed, mirror):
     torch.testing.assert_close(torch.linalg.det(R2), torch.ones(B, dtype=torch.float64), atol=1e-9, rtol=0)
     trace = lambda R: R.diagonal(dim1=-2, dim2=-1).sum(-1)  # noqa: E731
     torch.testing.assert_close(trace(R2), trace(T[:, :3, :3]), atol=1e-9, rtol=0)
+
+
+@given(seed=st.integers(0, 2**31 - 1), spread=st.floats(0.01, 0.5))
+def test_scale_augmentation_keeps_the_ground_truth_consistent_and_rotations_unchanged(seed, spread):
+    g = torch.Generator().manual_seed(seed)
+    B, N = 4, 12
+    T = torch.eye(4, dtype=torch.float64).repeat(B, 1, 1)
+    T[:, :3, :3] = torch.linalg.qr(torch.randn(B, 3, 3, generator=g, dtype=torch.float64)).Q
+    T[:, :3, :3] *= torch.sign(torch.linalg.det(T[:, :3, :3]))[:, None, None]  # proper rotations
+    T[:, :3, 3] = torch.randn(B, 3, generator=g, dtype=torch.float64)
+    p = torch.randn(B, N, 3, generator=g, dtype=torch.float64)
+    goal = p @ T[:, :3, :3].transpose(1, 2) + T[:, :3, 3:].transpose(1, 2)
+    batch = {"action": p, "anchor": goal, "gt_transform": T, "gt_equivalents": torch.stack([T, T], dim=1)}
+    out = random_scale(batch, spread, g)
+    factor = out["action"].norm(dim=-1) / p.norm(dim=-1)  # (B, N): one factor per scene
+    assert bool(((factor - factor[:, :1]).abs() < 1e-9).all())
+    assert bool(((factor - 1).abs() <= spread + 1e-9).all())
+    T2 = out["gt_transform"]
+    moved = out["action"] @ T2[:, :3, :3].transpose(1, 2) + T2[:, :3, 3:].transpose(1, 2)
+    torch.testing.assert_close(moved, out["anchor"], atol=1e-9, rtol=0)
+    torch.testing.assert_close(T2[:, :3, :3], T[:, :3, :3])
+    torch.testing.assert_close(out["gt_equivalents"][:, 1], T2)
+    torch.testing.assert_close(batch["action"], p)  # the input batch is left alone
+
+
+def test_scale_augmentation_rejects_a_spread_outside_0_1():
+    batch = {"action": torch.zeros(1, 2, 3), "anchor": torch.zeros(1, 2, 3), "gt_transform": torch.eye(4)[None]}
+    for spread in (-0.1, 1.0):
+        with pytest.raises(ValueError, match="spread"):
+            random_scale(batch, spread)
 
 
 def test_mirror_augmentation_reflects_about_half_the_scenes():

@@ -349,3 +349,48 @@ def test_svd_benchmark_runs_and_agrees_with_roma(tmp_path, capsys) -> None:
     assert written["batch"] == 4 and written["points"] == 50
     assert results["max_abs_diff"] < 1e-9 and results["wpbench_ms"] > 0
     assert "roma.rigid_points_registration" in capsys.readouterr().out
+
+
+@given(seed=st.integers(0, 2**31 - 1), k=st.integers(1, 5))
+@settings(deadline=None)
+def test_fusing_identical_predictions_returns_that_prediction(seed, k):
+    from wpbench.models.subset_ensemble import fuse_goal_clouds
+
+    g = torch.Generator().manual_seed(seed)
+    points = torch.randn(2, 30, 3, generator=g, dtype=torch.float64)
+    T = se3.make_transform(roma.random_rotmat(2, dtype=torch.float64), torch.randn(2, 3, generator=g, dtype=torch.float64))
+    fused = fuse_goal_clouds(points, T.expand(k, -1, -1, -1))
+    torch.testing.assert_close(fused, T, atol=1e-8, rtol=0)
+
+
+def test_fusing_two_translations_gives_their_mean_and_two_turns_the_half_turn():
+    from wpbench.models.subset_ensemble import fuse_goal_clouds
+
+    # A box's corners: its covariance is diagonal, so averaging two opposite turns only shrinks it.
+    corners = torch.tensor([[x, y, z] for x in (-1, 1) for y in (-2, 2) for z in (-3, 3)], dtype=torch.float64)
+    points = (0.1 * corners + torch.tensor([0.5, -0.2, 0.8], dtype=torch.float64))[None]
+    a, b = torch.eye(4, dtype=torch.float64), torch.eye(4, dtype=torch.float64)
+    a[:3, 3] = torch.tensor([0.2, 0.0, 0.0], dtype=torch.float64)
+    b[:3, 3] = torch.tensor([0.0, 0.4, 0.0], dtype=torch.float64)
+    fused = fuse_goal_clouds(points, torch.stack([a, b])[:, None])
+    torch.testing.assert_close(fused[0, :3, 3], torch.tensor([0.1, 0.2, 0.0], dtype=torch.float64), atol=1e-9, rtol=0)
+    torch.testing.assert_close(fused[0, :3, :3], torch.eye(3, dtype=torch.float64), atol=1e-9, rtol=0)
+    # Turns of +-20 deg about z through the cloud's centroid average to no turn.
+    c = points[0].mean(dim=0)
+    turns = []
+    for angle in (0.35, -0.35):
+        R = roma.rotvec_to_rotmat(torch.tensor([0.0, 0.0, angle], dtype=torch.float64))
+        turns.append(se3.make_transform(R, c - R @ c))
+    fused = fuse_goal_clouds(points, torch.stack(turns)[:, None])
+    torch.testing.assert_close(fused[0], torch.eye(4, dtype=torch.float64), atol=1e-9, rtol=0)
+
+
+def test_fusing_checks_shapes():
+    from wpbench.models.subset_ensemble import fuse_goal_clouds
+
+    with pytest.raises(ValueError, match="points"):
+        fuse_goal_clouds(torch.zeros(5, 3), torch.eye(4)[None, None])
+    with pytest.raises(ValueError, match="transforms"):
+        fuse_goal_clouds(torch.zeros(2, 5, 3), torch.eye(4)[None, None])
+    with pytest.raises(ValueError, match="at least one"):
+        fuse_goal_clouds(torch.zeros(1, 5, 3), torch.zeros(0, 1, 4, 4))

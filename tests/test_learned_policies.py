@@ -60,6 +60,34 @@ def test_learned_policy_gives_a_rigid_transform_and_full_size_diagnostics(weight
     assert policy.describe()["policy"] == name
 
 
+def test_subset_ensemble_fuses_several_subsets_and_one_subset_is_the_single_pass(weights_root):
+    import torch
+
+    single = LearnedPolicy(policy="wp-postsvd", weights_root=weights_root, subsets=1)
+    fused = LearnedPolicy(policy="wp-postsvd", weights_root=weights_root, subsets=4)
+    obs = _obs(seed=3)
+    one, four = single.predict(obs).transform, fused.predict(obs).transform
+    _assert_rigid(four)
+    # subsets=1 is the model on the first subset; the fused answer is the Kabsch fit to the mean of four.
+    rng = np.random.default_rng(0)
+    picks = [(single._subsample(obs["action_points"], single.num_action_points, rng),
+              single._subsample(obs["anchor_points"], single.num_anchor_points, rng)) for _ in range(4)]
+    with torch.no_grad():
+        answers = [single.model(torch.from_numpy(obs["action_points"][ia])[None],
+                                torch.from_numpy(obs["anchor_points"][ib])[None]).transform[0].double().numpy()
+                   for ia, ib in picks]
+    np.testing.assert_allclose(one, answers[0], atol=1e-5)
+    from wpbench.models.subset_ensemble import fuse_goal_clouds
+
+    expected = fuse_goal_clouds(torch.from_numpy(obs["action_points"]).double()[None],
+                                torch.from_numpy(np.stack(answers))[:, None])[0].numpy()
+    np.testing.assert_allclose(four, expected, atol=1e-5)
+    assert not np.allclose(four, one, atol=1e-6)  # the other subsets changed the answer
+    assert fused.describe()["config"]["subsets"] == 4
+    with pytest.raises(ValueError, match="subsets"):
+        LearnedPolicy(policy="wp-postsvd", weights_root=weights_root, subsets=0)
+
+
 def test_registry_builds_the_learned_policies_and_wp_follows_best_json(weights_root):
     best = json.loads((weights_root / "best.json").read_text())["policy"]
     assert best == "wp-postsvd"

@@ -13,6 +13,8 @@ def paper_table(
     episodes: int = typer.Option(100, min=1, help="Simulated episodes per policy and task."),
     obs: str = typer.Option("camera", help="Observation mode of the simulated runs."),
     run_missing: bool = typer.Option(True, help="Run the simulations that results/runs lacks."),
+    subsets: int = typer.Option(None, min=1, help="Random point subsets per sample, fused into one pose "
+                                                  "[default: as the learned policies answer]."),
     out: Path = typer.Option(Path("results/paper-table.md"), help="Markdown file to write."),
 ) -> None:
     """Pose errors (train/val x free-floating/articulated) and simulated success of every learned policy."""
@@ -23,7 +25,7 @@ def paper_table(
     if not (data / "train").is_dir() or not (data / "val").is_dir():
         raise typer.BadParameter(f"{data} lacks train/ and val/; make them with `wpbench data generate --out {data}`")
     cfg = PaperTableConfig(data=data, samples_per_kind=samples, episodes=episodes, obs=obs, run_missing=run_missing,
-                           results=out.parent)
+                           results=out.parent, **({} if subsets is None else {"subsets": subsets}))
     path = make_paper_table(cfg, out)
     typer.echo(path.read_text())
     typer.echo(f"written: {path}")

@@ -44,6 +44,9 @@ def run(
     weights_root: Path = typer.Option(
         None, help="Load trained policies from this folder instead of policies/weights (an experiment's "
                    "weights); the run then goes to <weights-root>/runs/ unless --out says otherwise."),
+    subsets: int = typer.Option(
+        None, min=1, help="Trained policies: random subsets of each observation answered and fused into one pose "
+                          "[default: the policy's, wpbench.models.configs.DEFAULT_SUBSETS]."),
 ) -> None:
     """Run POLICY on TASK for N episodes: progress bar, summary table, episodes.jsonl and summary.json."""
     if policy == "list":
@@ -56,11 +59,14 @@ def run(
     if assets != "procedural" and not Path(assets).is_dir():
         raise typer.BadParameter(f"--assets must be 'procedural' or an existing folder; {assets!r} is neither")
     policy_kwargs = {}
-    if weights_root is not None:
-        learned = _learned_policies()
-        if policy not in learned:
-            raise typer.BadParameter(f"--weights-root applies to the trained policies ({', '.join(learned)}); "
+    learned = _learned_policies()
+    for flag, value in (("--weights-root", weights_root), ("--subsets", subsets)):
+        if value is not None and policy not in learned:
+            raise typer.BadParameter(f"{flag} applies to the trained policies ({', '.join(learned)}); "
                                      f"{policy!r} loads no weights")
+    if subsets is not None:
+        policy_kwargs["subsets"] = subsets
+    if weights_root is not None:
         if not weights_root.is_dir():
             raise typer.BadParameter(f"--weights-root {weights_root} is not a folder; train into it with "
                                      f"`wpbench train --policy NAME --weights-root {weights_root}`")

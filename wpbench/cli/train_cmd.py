@@ -38,6 +38,8 @@ def train(
     seed: int = typer.Option(0, help="Seed for initialisation, shuffling and augmentation."),
     augment: bool = typer.Option(True, help="Random yaw of each training scene."),
     mirror: bool = typer.Option(True, help="With --augment: also mirror half the scenes (left and right hinges)."),
+    scale: float = typer.Option(0.0, min=0.0, max=0.99,
+                                help="Scale each training scene by a random factor in [1 - SCALE, 1 + SCALE]."),
     restart: bool = typer.Option(False, help="Ignore an existing checkpoint and start from scratch."),
     select_best: bool = typer.Option(False, "--select-best",
                                      help="Do not train: write WEIGHTS_ROOT/best.json from the trained WeightedPose variants."),
@@ -68,7 +70,7 @@ def train(
             policy=policy, data=data, out=out, weights_root=weights_root, minutes=minutes, max_steps=max_steps,
             steps_per_epoch=steps_per_epoch, batch_size=batch_size, learning_rate=learning_rate, mixing_warmup=mixing_warmup,
             lr_schedule=lr_schedule,
-            num_action_points=num_action_points, num_anchor_points=num_anchor_points, augment_yaw=augment, augment_mirror=mirror,
+            num_action_points=num_action_points, num_anchor_points=num_anchor_points, augment_yaw=augment, augment_mirror=mirror, augment_scale=scale,
             val_per_kind=val_per_kind, final_val_per_kind=final_val_per_kind, seed=seed, threads=threads,
             model_overrides=overrides,
         )

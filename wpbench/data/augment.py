@@ -12,6 +12,13 @@ reflections cancel). It turns a left-hinged door into a right-hinged one, so
 the training furniture counts twice for the hinge side, which a model must read
 from the handle. A least-rotation target stays least-rotation, because the
 mirror conjugates every symmetric equivalent alike and keeps rotation angles.
+
+A uniform scale ``s`` about the world origin (``p -> s p``) keeps rotations and
+scales translations: ``s p_goal = s (R p + t) = R (s p) + s t``, so ``T' = [R | s t]``.
+The floor (z = 0) stays where it is. A chest of drawers scaled by ``s`` slides ``s``
+times as far, so scaling ties a drawer's travel to the furniture's visible size
+instead of to one of the few training instances (their open limit is a fixed
+fraction of their depth, ``wpbench.assets.procedural.storage``).
 """
 
 from __future__ import annotations
@@ -56,4 +63,28 @@ def random_yaw(
     if "gt_equivalents" in batch:
         E = batch["gt_equivalents"].to(torch.float64)
         out["gt_equivalents"] = (A[:, None] @ E @ A.transpose(1, 2)[:, None]).to(batch["gt_equivalents"].dtype)
+    return out
+
+
+def random_scale(
+    batch: dict[str, torch.Tensor], spread: float, generator: torch.Generator | None = None
+) -> dict[str, torch.Tensor]:
+    """Scale each sample of ``batch`` about the world origin by its own factor, uniform in
+    ``[1 - spread, 1 + spread]`` (0 <= spread < 1).
+
+    batch: as for :func:`random_yaw`; ``gt_transform`` (B, 4, 4) and ``gt_equivalents``
+    (B, K, 4, 4) keep their rotations and have their translations scaled.
+    """
+    if not 0.0 <= spread < 1.0:
+        raise ValueError(f"scale spread must be in [0, 1), got {spread}")
+    B = batch["action"].shape[0]
+    factor = 1.0 + (torch.rand(B, generator=generator, dtype=torch.float64) * 2 - 1) * spread
+    out = dict(batch)
+    for key in ("action", "anchor"):
+        out[key] = batch[key] * factor.to(batch[key].dtype)[:, None, None]
+    for key, shape in (("gt_transform", (B, 1)), ("gt_equivalents", (B, 1, 1))):
+        if key in batch:
+            T = batch[key].clone()
+            T[..., :3, 3] = T[..., :3, 3] * factor.to(T.dtype).view(*shape)
+            out[key] = T
     return out

@@ -22,6 +22,8 @@ MixingWeightMode = Literal["per_sample", "per_point"]
 # Directions the heading frame can put on +x (``wpbench.models.heading_frame``).
 HeadingSource = Literal["centroids", "action_panel"]
 HEADING_SOURCES: tuple[str, ...] = ("centroids", "action_panel")
+# Random point subsets a learned policy answers and fuses into one pose (``wpbench.models.subset_ensemble``).
+DEFAULT_SUBSETS = 1
 
 
 @dataclass(frozen=True)

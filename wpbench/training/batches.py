@@ -13,7 +13,7 @@ from collections.abc import Iterator
 
 import torch
 
-from wpbench.data.augment import random_yaw
+from wpbench.data.augment import random_scale, random_yaw
 from wpbench.data.dataset import CrossPoseDataset
 
 
@@ -39,13 +39,16 @@ def make_batch(dataset: CrossPoseDataset, indices: torch.Tensor) -> dict[str, to
 
 def prepare(
     batch: dict[str, torch.Tensor], num_action: int, num_anchor: int, augment: bool, generator: torch.Generator,
-    mirror: bool = False,
+    mirror: bool = False, scale: float = 0.0,
 ) -> dict[str, torch.Tensor]:
-    """Subsample both clouds and (optionally) rotate the scene by a random yaw, mirrored half the time."""
+    """Subsample both clouds and (optionally) rotate the scene by a random yaw, mirrored half the time,
+    and scale it by a random factor in [1 - scale, 1 + scale] (no scaling at 0)."""
     out = dict(batch)
     out["action"] = subsample_points(batch["action"], num_action, generator)
     out["anchor"] = subsample_points(batch["anchor"], num_anchor, generator)
-    return random_yaw(out, generator, mirror) if augment else out
+    if augment:
+        out = random_yaw(out, generator, mirror)
+    return random_scale(out, scale, generator) if scale > 0 else out
 
 
 def shuffled_batches(size: int, batch_size: int, generator: torch.Generator) -> Iterator[torch.Tensor]:

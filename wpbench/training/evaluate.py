@@ -4,6 +4,10 @@ rotation error (deg), translation error (m, goal position of the action
 centroid), point error (m, mean |T_pred p - T_gt p| over the action points),
 all against the equivalent goal nearest to the prediction in rotation (for a symmetric
 object every equivalent goal is correct; ``wpbench.data.equivalent_goals``).
+
+``subsets`` > 1 answers each sample from that many random subsets of its stored clouds,
+fused like the learned policies do (``wpbench.models.subset_ensemble``); the errors are
+then measured on every stored action point. Training validates with one subset.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from wpbench.data.config import KIND_CODE, KINDS
 from wpbench.data.dataset import CrossPoseDataset
 from wpbench.data.equivalent_goals import nearest_goal
 from wpbench.geometry import metrics
+from wpbench.models.subset_ensemble import fuse_goal_clouds
 from wpbench.training.batches import make_batch, subsample_points
 
 
@@ -28,11 +33,15 @@ def per_sample_errors(
     num_anchor: int,
     batch_size: int = 16,
     seed: int = 0,
+    subsets: int = 1,
 ) -> dict[str, torch.Tensor]:
     """Errors of each sample ``indices`` of ``dataset``: {"rot_deg", "trans_m", "point_m"[, "w"]}, each (len(indices),).
 
-    The clouds are subsampled to the model's point counts with a fixed seed. NaN predictions give NaN errors.
+    The clouds are subsampled to the model's point counts with a fixed seed (``subsets`` times,
+    fused, when > 1). NaN predictions give NaN errors.
     """
+    if subsets < 1:
+        raise ValueError(f"subsets must be >= 1, got {subsets}")
     was_training = model.training
     model.eval()
     generator = torch.Generator().manual_seed(seed)
@@ -44,6 +53,12 @@ def per_sample_errors(
             anchor = subsample_points(batch["anchor"], num_anchor, generator)
             output = model(action, anchor)
             T_pred = output.transform.double()
+            if subsets > 1:
+                more = [model(subsample_points(batch["action"], num_action, generator),
+                              subsample_points(batch["anchor"], num_anchor, generator)).transform.double()
+                        for _ in range(subsets - 1)]
+                action = batch["action"]
+                T_pred = fuse_goal_clouds(action.double(), torch.stack([T_pred, *more]))
             if "w" in output.diagnostics:
                 columns["w"].append(output.diagnostics["w"].reshape(len(T_pred), -1).mean(dim=1).double())
             T_gt = nearest_goal(T_pred, batch["gt_equivalents"].double())
@@ -67,6 +82,7 @@ def evaluate(
     num_anchor: int,
     batch_size: int = 16,
     seed: int = 0,
+    subsets: int = 1,
 ) -> dict[str, dict[str, float]]:
     """{kind: {"rot_deg", "trans_m", "point_m", "failures", "n"[, "w"]}} on ``per_kind`` samples of each kind
     spread evenly over the split (fixed subsampling seed, so epochs are comparable).
@@ -78,7 +94,7 @@ def evaluate(
         idx = torch.nonzero(dataset.kind == KIND_CODE[kind]).flatten()
         if len(idx) > per_kind:  # spread over the whole split (consecutive samples share furniture)
             idx = idx[torch.linspace(0, len(idx) - 1, per_kind).round().long()]
-        errors = per_sample_errors(model, dataset, idx, num_action, num_anchor, batch_size, seed)
+        errors = per_sample_errors(model, dataset, idx, num_action, num_anchor, batch_size, seed, subsets)
         results[kind] = _summarise(errors)
     return results
 
@@ -90,10 +106,11 @@ def evaluate_by_category(
     num_action: int,
     num_anchor: int,
     seed: int = 0,
+    subsets: int = 1,
 ) -> dict[str, dict[str, float]]:
     """{category: the ``evaluate`` statistics} over every sample of ``kind`` in ``dataset``."""
     idx = torch.nonzero(dataset.kind == KIND_CODE[kind]).flatten()
-    errors = per_sample_errors(model, dataset, idx, num_action, num_anchor, seed=seed)
+    errors = per_sample_errors(model, dataset, idx, num_action, num_anchor, seed=seed, subsets=subsets)
     categories = [dataset.categories[i] for i in idx.tolist()]
     out = {}
     for category in sorted(set(categories)):
