@@ -38,8 +38,9 @@ def train(
     seed: int = typer.Option(0, help="Seed for initialisation, shuffling and augmentation."),
     augment: bool = typer.Option(True, help="Random yaw of each training scene."),
     mirror: bool = typer.Option(True, help="With --augment: also mirror half the scenes (left and right hinges)."),
-    scale: float = typer.Option(0.0, min=0.0, max=0.99,
-                                help="Scale each training scene by a random factor in [1 - SCALE, 1 + SCALE]."),
+    scale: float = typer.Option(None, min=0.0, max=0.99,
+                                help="Scale each training scene by a random factor in [1 - SCALE, 1 + SCALE] "
+                                     "[default: the policy's; 0.15 for gf and the WeightedPose variants, 0 for tp]."),
     restart: bool = typer.Option(False, help="Ignore an existing checkpoint and start from scratch."),
     select_best: bool = typer.Option(False, "--select-best",
                                      help="Do not train: write WEIGHTS_ROOT/best.json from the trained WeightedPose variants."),

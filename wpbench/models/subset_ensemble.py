@@ -8,11 +8,12 @@ are averaged point by point, and one Kabsch fit (``weighted_procrustes``, unifor
 weights) turns the mean goal cloud back into a rigid transform. For K = 1 that fit
 returns the prediction itself.
 
-Measured on the data3 val split (wp-postsvd-t, every sample, 8 subsets against 1):
-translation error 4.33 -> 3.92 cm on articulated and 3.27 -> 2.85 cm on free-floating
-samples; rotation error unchanged (4.9 / 11.6 deg). A per-point median instead of the
-mean gave the same numbers, so the simpler mean is used. How many subsets the learned
-policies use by default is ``wpbench.models.configs.DEFAULT_SUBSETS``.
+Measured on the data3 val split (every sample), shipped wp-postsvd-t, 1 / 4 / 8 subsets:
+translation error 4.05 / 3.65 / 3.63 cm on articulated and 3.11 / 2.78 cm (1 / 4) on
+free-floating samples; rotation error about unchanged (articulated 4.66 / 4.65 / 4.55 deg,
+free-floating 11.8 / 12.0 deg). Beyond 4 subsets the gain is small for twice the cost, so
+``wpbench.models.configs.DEFAULT_SUBSETS`` is 4. A per-point median instead of the mean
+gave the same numbers (8 subsets), so the simpler mean is used.
 
 Convention: transforms act on column vectors, ``p_goal = R p + t``; clouds are (B, N, 3).
 """

@@ -53,7 +53,9 @@ class TrainConfig:
     num_anchor_points: int = 512
     augment_yaw: bool = True
     augment_mirror: bool = True  # with augment_yaw: also reflect half the scenes (wpbench.data.augment)
-    augment_scale: float = 0.0  # scale each scene by a factor in [1 - s, 1 + s] (wpbench.data.augment.random_scale)
+    # Scale each scene by a factor in [1 - s, 1 + s] (wpbench.data.augment.random_scale);
+    # None = the policy's default (``specs``), resolved here so config.json records the number.
+    augment_scale: float | None = None
     val_per_kind: int = 32
     final_val_per_kind: int = 200
     seed: int = 0
@@ -72,6 +74,10 @@ class TrainConfig:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.lr_schedule not in ("constant", "cosine"):
             raise ValueError(f"lr_schedule must be 'constant' or 'cosine', got {self.lr_schedule!r}")
+        if self.augment_scale is None:
+            from wpbench.training.specs import get_spec
+
+            self.augment_scale = get_spec(self.policy).augment_scale
         if not 0.0 <= self.augment_scale < 1.0:
             raise ValueError(f"augment_scale must be in [0, 1), got {self.augment_scale}")
         if self.mixing_warmup is not None and not 0.0 <= self.mixing_warmup < 1.0:

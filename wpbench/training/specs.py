@@ -24,16 +24,22 @@ class PolicySpec:
     # (branches frozen), at ``mixing_learning_rate``; see ``wpbench.training.warmup``.
     mixing_warmup: float = 0.0
     mixing_learning_rate: float = 1e-3
+    # Random scene scale in [1 - s, 1 + s] (``wpbench.data.augment.random_scale``). On for the
+    # policies that see furniture motion: it ties a drawer's travel to the chest's size. Off for
+    # TAX-Pose, trained before it existed (its block is always the same 16 cm cube).
+    augment_scale: float = 0.0
 
 
 POLICY_SPECS: dict[str, PolicySpec] = {
     spec.name: spec
     for spec in (
-        PolicySpec("gf", "goalflow", "gf", (ARTICULATED,)),
+        PolicySpec("gf", "goalflow", "gf", (ARTICULATED,), augment_scale=0.15),
         PolicySpec("tp", "taxpose", "tp", (FREE,)),
-        PolicySpec("wp-og", "weightedpose", "wp-og", (ARTICULATED, FREE), ("gf", "tp"), 1e-4, 0.25),
-        PolicySpec("wp-postsvd", "weightedpose", "wp-postsvd", (ARTICULATED, FREE), ("gf", "tp"), 1e-4, 0.25),
-        PolicySpec("wp-postsvd-t", "weightedpose", "wp-postsvd-t", (ARTICULATED, FREE), ("gf", "tp"), 1e-4, 0.25),
+        PolicySpec("wp-og", "weightedpose", "wp-og", (ARTICULATED, FREE), ("gf", "tp"), 1e-4, 0.25, augment_scale=0.15),
+        PolicySpec("wp-postsvd", "weightedpose", "wp-postsvd", (ARTICULATED, FREE), ("gf", "tp"), 1e-4, 0.25,
+                   augment_scale=0.15),
+        PolicySpec("wp-postsvd-t", "weightedpose", "wp-postsvd-t", (ARTICULATED, FREE), ("gf", "tp"), 1e-4, 0.25,
+                   augment_scale=0.15),
     )
 }
 WEIGHTED_POSE_VARIANTS = tuple(name for name, spec in POLICY_SPECS.items() if spec.model == "weightedpose")
