@@ -301,3 +301,23 @@ def test_run_weights_root_loads_the_experiment_and_writes_beside_it(runner, monk
     missing = runner.invoke(cli.app, ["run", "--policy", "gf", "--weights-root", str(tmp_path / "nowhere")])
     assert missing.exit_code == 2 and "wpbench train --policy NAME --weights-root" in missing.output
     assert len(seen) == 1
+
+
+def test_run_subsets_reaches_the_learned_policy_and_is_refused_for_the_others(runner, monkeypatch):
+    import wpbench.evaluation.runner as runner_module
+    from policies.registry import make_policy
+
+    seen = []
+
+    def fake_run_benchmark(cfg, **_):
+        seen.append(cfg)
+        raise ValueError("stopped by the test")
+
+    monkeypatch.setattr(runner_module, "run_benchmark", fake_run_benchmark)
+    result = runner.invoke(cli.app, ["run", "--policy", "oracle", "--task", "open-door", "--subsets", "2"])
+    assert result.exit_code == 2 and "stopped by the test" in result.output
+    policy = make_policy(seen[0].policy, **seen[0].policy_kwargs)
+    assert {expert.config.subsets for expert in policy.experts.values()} == {2}
+    refused = runner.invoke(cli.app, ["run", "--policy", "identity", "--subsets", "2"])
+    assert refused.exit_code == 2 and "--subsets applies to the trained policies" in refused.output
+    assert len(seen) == 1

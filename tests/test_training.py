@@ -124,3 +124,26 @@ def test_errors_by_category_partition_the_samples(tmp_path):
     assert sorted(per) == ["fridge", "oven"] and sum(v["n"] for v in per.values()) == overall["n"] == 6
     pooled = sum(v["rot_deg"] * v["n"] for v in per.values()) / overall["n"]
     assert pooled == pytest.approx(overall["rot_deg"], rel=1e-9)
+
+
+def test_evaluation_with_subsets_fuses_them_and_skips_them_when_the_clouds_are_not_subsampled(tmp_path):
+    import torch
+
+    from wpbench.data.dataset import CrossPoseDataset
+    from wpbench.data.synthetic import write_synthetic_split
+    from wpbench.models import build_model
+    from wpbench.training.evaluate import per_sample_errors
+
+    write_synthetic_split(tmp_path, "val", per_kind=4, num_action_points=32, num_anchor_points=48)
+    dataset = CrossPoseDataset(tmp_path / "val", kinds=("articulated",))
+    torch.manual_seed(0)
+    model = build_model("goalflow", encoder={"k": 4, "edge_channels": [8, 8], "emb_dim": 16, "groups": 4}, head_hidden=16)
+    idx = torch.arange(len(dataset))
+    one = per_sample_errors(model, dataset, idx, 24, 40)
+    three = per_sample_errors(model, dataset, idx, 24, 40, subsets=3)
+    assert torch.isfinite(three["rot_deg"]).all() and not torch.allclose(one["point_m"], three["point_m"])
+    # Whole clouds in: every subset is the same cloud, so more subsets change nothing.
+    whole = per_sample_errors(model, dataset, idx, 32, 48)
+    torch.testing.assert_close(per_sample_errors(model, dataset, idx, 32, 48, subsets=3), whole)
+    with pytest.raises(ValueError, match="subsets"):
+        per_sample_errors(model, dataset, idx, 24, 40, subsets=0)

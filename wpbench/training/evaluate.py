@@ -53,7 +53,8 @@ def per_sample_errors(
             anchor = subsample_points(batch["anchor"], num_anchor, generator)
             output = model(action, anchor)
             T_pred = output.transform.double()
-            if subsets > 1:
+            # Clouds no larger than the model's input would give the same subset every time.
+            if subsets > 1 and (batch["action"].shape[1] > num_action or batch["anchor"].shape[1] > num_anchor):
                 more = [model(subsample_points(batch["action"], num_action, generator),
                               subsample_points(batch["anchor"], num_anchor, generator)).transform.double()
                         for _ in range(subsets - 1)]
