@@ -78,9 +78,11 @@ class LearnedPolicy(Policy):
         self.config = config
         import torch
 
+        from wpbench.models.subset_ensemble import fuse_goal_clouds
         from wpbench.training.artifacts import load_trained_model
 
         self._torch = torch
+        self._fuse = fuse_goal_clouds
         self.model, self.model_config = load_trained_model(config.weights_dir, config.policy)
         self.num_action_points = int(self.model_config["num_action_points"])
         self.num_anchor_points = int(self.model_config["num_anchor_points"])
@@ -106,8 +108,6 @@ class LearnedPolicy(Policy):
         torch = self._torch
         action = _cloud(obs, "action_points")
         anchor = _cloud(obs, "anchor_points")
-        from wpbench.models.subset_ensemble import fuse_goal_clouds
-
         rng = np.random.default_rng(self.config.seed)
         # Clouds no larger than the model's input give one subset only: every subset would be the same.
         count = self.config.subsets if (len(action) > self.num_action_points or len(anchor) > self.num_anchor_points) else 1
@@ -116,8 +116,10 @@ class LearnedPolicy(Policy):
         with torch.no_grad():
             out = self.model(torch.from_numpy(np.stack([action[ia] for ia, _ in picks])),
                              torch.from_numpy(np.stack([anchor[ib] for _, ib in picks])))
-            fused = fuse_goal_clouds(torch.from_numpy(action).double()[None], out.transform.double()[:, None])
-        transform = fused[0].numpy()
+            transform = out.transform.double()
+            if count > 1:  # one subset is the model's answer as it is
+                transform = self._fuse(torch.from_numpy(action).double()[None], transform[:, None])
+        transform = transform[0].numpy()
         ia, ib = picks[0]
         clouds = {"action": (action, ia), "anchor": (anchor, ib)}
         diagnostics: dict[str, Any] = {}
