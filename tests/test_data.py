@@ -11,7 +11,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from wpbench.data.augment import random_scale, random_yaw
+from wpbench.data.augment import random_scale, random_slide_stretch, random_yaw
 from wpbench.data.config import ARTICULATED, FREE, GenerationConfig
 from wpbench.data.dataset import CrossPoseDataset
 from wpbench.data.generate import generate, symmetric_min_rotation
@@ -139,11 +139,49 @@ def test_scale_augmentation_keeps_the_ground_truth_consistent_and_rotations_unch
     torch.testing.assert_close(batch["action"], p)  # the input batch is left alone
 
 
-def test_scale_augmentation_rejects_a_spread_outside_0_1():
-    batch = {"action": torch.zeros(1, 2, 3), "anchor": torch.zeros(1, 2, 3), "gt_transform": torch.eye(4)[None]}
+@pytest.mark.parametrize("augmentation", [random_scale, random_slide_stretch])
+def test_scale_and_stretch_reject_a_spread_outside_0_1(augmentation):
+    batch = {"action": torch.zeros(1, 2, 3), "anchor": torch.zeros(1, 2, 3), "gt_transform": torch.eye(4)[None],
+             "kind": torch.zeros(1, dtype=torch.int64)}
     for spread in (-0.1, 1.0):
         with pytest.raises(ValueError, match="spread"):
-            random_scale(batch, spread)
+            augmentation(batch, spread)
+
+
+@settings(max_examples=30)
+@given(seed=st.integers(0, 2**31 - 1), spread=st.floats(0.05, 0.5))
+def test_slide_stretch_lengthens_drawer_scenes_along_the_slide_only(seed, spread):
+    g = torch.Generator().manual_seed(seed)
+    N = 16
+    # Three scenes: a drawer (pure horizontal translation), a door (turn about z), a free block
+    # that happens to move by a pure translation (kind 1: must be left alone too).
+    heading = float(torch.rand(1, generator=g)) * 2 * math.pi
+    slide = torch.tensor([math.cos(heading), math.sin(heading), 0.0], dtype=torch.float64)
+    T = torch.eye(4, dtype=torch.float64).repeat(3, 1, 1)
+    T[0, :3, 3] = (0.05 + 0.4 * float(torch.rand(1, generator=g))) * slide
+    T[1, :2, :2] = torch.tensor([[0.0, -1.0], [1.0, 0.0]], dtype=torch.float64)
+    T[1, :3, 3] = torch.tensor([0.3, -0.2, 0.0], dtype=torch.float64)
+    T[2, :3, 3] = torch.tensor([0.1, 0.2, 0.3], dtype=torch.float64)
+    p = torch.randn(3, N, 3, generator=g, dtype=torch.float64)
+    goal = p @ T[:, :3, :3].transpose(1, 2) + T[:, :3, 3:].transpose(1, 2)
+    batch = {"action": p, "anchor": goal, "gt_transform": T, "gt_equivalents": T[:, None].clone(),
+             "kind": torch.tensor([0, 0, 1])}
+    out = random_slide_stretch(batch, spread, g)
+    T2 = out["gt_transform"]
+    moved = out["action"] @ T2[:, :3, :3].transpose(1, 2) + T2[:, :3, 3:].transpose(1, 2)
+    torch.testing.assert_close(moved, out["anchor"], atol=1e-9, rtol=0)  # the goal is still exact
+    torch.testing.assert_close(out["gt_equivalents"][:, 0], T2)
+    for key in ("action", "anchor", "gt_transform"):  # the door and the block are untouched
+        torch.testing.assert_close(out[key][1:], batch[key][1:])
+    # The drawer scene: lengths along the slide change by one factor in range, across it by none.
+    factor = float(T2[0, :3, 3].norm() / T[0, :3, 3].norm())
+    assert abs(factor - 1) <= spread + 1e-9
+    along = lambda x: x @ slide  # noqa: E731
+    across = lambda x: x - along(x)[..., None] * slide  # noqa: E731
+    before, after = p[0] - p[0, :1], out["action"][0] - out["action"][0, :1]
+    torch.testing.assert_close(along(after), factor * along(before), atol=1e-9, rtol=0)
+    torch.testing.assert_close(across(after), across(before), atol=1e-9, rtol=0)
+    torch.testing.assert_close(T2[0, :3, :3], torch.eye(3, dtype=torch.float64))
 
 
 def test_mirror_augmentation_reflects_about_half_the_scenes():

@@ -19,6 +19,15 @@ The floor (z = 0) stays where it is. A chest of drawers scaled by ``s`` slides `
 times as far, so scaling ties a drawer's travel to the furniture's visible size
 instead of to one of the few training instances (their open limit is a fixed
 fraction of their depth, ``wpbench.assets.procedural.storage``).
+
+A uniform scale ties the travel to the chest's size as a whole, but a chest's depth is
+drawn independently of its width and height, so the rule a model needs is "deeper chest,
+longer slide". A stretch along the slide direction ``a`` (a unit horizontal vector) by
+``s``, ``S = I + (s - 1) a a^T`` about the anchor's centroid, is that rule exactly: the
+chest, the drawer and its travel get longer along ``a`` alone, and a goal that is a pure
+translation ``t`` along ``a`` becomes ``S t = s t`` (``T' = [I | s t]``). Only sliding
+samples get it (a stretch does not keep a door's rotation rigid); they are recognised from
+the ground truth, a translation of more than 1 cm with no rotation.
 """
 
 from __future__ import annotations
@@ -82,6 +91,53 @@ def random_scale(
     out = dict(batch)
     for key in ("action", "anchor"):
         out[key] = batch[key] * factor.to(batch[key].dtype)[:, None, None]
+    for key, shape in (("gt_transform", (B, 1)), ("gt_equivalents", (B, 1, 1))):
+        if key in batch:
+            T = batch[key].clone()
+            T[..., :3, 3] = T[..., :3, 3] * factor.to(T.dtype).view(*shape)
+            out[key] = T
+    return out
+
+
+def sliding_samples(batch: dict[str, torch.Tensor], min_travel: float = 0.01) -> torch.Tensor:
+    """(B,) bool: the articulated samples whose goal (and every equivalent goal) is a pure
+    translation of more than ``min_travel`` metres (a drawer with travel left)."""
+    T = batch["gt_transform"].to(torch.float64)
+    eye = torch.eye(3, dtype=torch.float64)
+    pure = (T[:, :3, :3] - eye).abs().amax(dim=(1, 2)) < 1e-5
+    if "gt_equivalents" in batch:
+        E = batch["gt_equivalents"].to(torch.float64)
+        pure &= (E[..., :3, :3] - eye).abs().flatten(1).amax(dim=1) < 1e-5
+    moving = T[:, :3, 3].norm(dim=1) > min_travel
+    return (batch["kind"] == 0) & pure & moving
+
+
+def random_slide_stretch(
+    batch: dict[str, torch.Tensor], spread: float, generator: torch.Generator | None = None
+) -> dict[str, torch.Tensor]:
+    """Stretch each sliding sample of ``batch`` (:func:`sliding_samples`) along its slide
+    direction by its own factor, uniform in ``[1 - spread, 1 + spread]`` (0 <= spread < 1),
+    about the anchor's centroid; other samples are passed through.
+
+    batch: as for :func:`random_yaw`, plus ``kind`` (B,) (0 articulated); the goal
+    translations of the stretched samples (``gt_transform`` and ``gt_equivalents``) are
+    multiplied by their factor.
+    """
+    if not 0.0 <= spread < 1.0:
+        raise ValueError(f"stretch spread must be in [0, 1), got {spread}")
+    B = batch["action"].shape[0]
+    factor = 1.0 + (torch.rand(B, generator=generator, dtype=torch.float64) * 2 - 1) * spread
+    chosen = sliding_samples(batch)
+    factor = torch.where(chosen, factor, torch.ones_like(factor))
+    t = batch["gt_transform"][:, :3, 3].to(torch.float64)
+    direction = t / t.norm(dim=1, keepdim=True).clamp_min(1e-12)
+    # S = I + (s - 1) a a^T; identity where the sample is not stretched.
+    S = torch.eye(3, dtype=torch.float64) + (factor - 1.0)[:, None, None] * direction[:, :, None] * direction[:, None, :]
+    centre = batch["anchor"].to(torch.float64).mean(dim=1, keepdim=True)
+    out = dict(batch)
+    for key in ("action", "anchor"):
+        points = batch[key].to(torch.float64)
+        out[key] = ((points - centre) @ S.transpose(1, 2) + centre).to(batch[key].dtype)
     for key, shape in (("gt_transform", (B, 1)), ("gt_equivalents", (B, 1, 1))):
         if key in batch:
             T = batch[key].clone()

@@ -13,7 +13,7 @@ from collections.abc import Iterator
 
 import torch
 
-from wpbench.data.augment import random_scale, random_yaw
+from wpbench.data.augment import random_scale, random_slide_stretch, random_yaw
 from wpbench.data.dataset import CrossPoseDataset
 
 
@@ -39,15 +39,18 @@ def make_batch(dataset: CrossPoseDataset, indices: torch.Tensor) -> dict[str, to
 
 def prepare(
     batch: dict[str, torch.Tensor], num_action: int, num_anchor: int, augment: bool, generator: torch.Generator,
-    mirror: bool = False, scale: float = 0.0,
+    mirror: bool = False, scale: float = 0.0, stretch: float = 0.0,
 ) -> dict[str, torch.Tensor]:
     """Subsample both clouds and (optionally) rotate the scene by a random yaw, mirrored half the time,
-    and scale it by a random factor in [1 - scale, 1 + scale] (no scaling at 0)."""
+    stretch sliding samples along their slide by a factor in [1 - stretch, 1 + stretch], and scale
+    the scene by a random factor in [1 - scale, 1 + scale] (each off at 0)."""
     out = dict(batch)
     out["action"] = subsample_points(batch["action"], num_action, generator)
     out["anchor"] = subsample_points(batch["anchor"], num_anchor, generator)
     if augment:
         out = random_yaw(out, generator, mirror)
+    if stretch > 0:
+        out = random_slide_stretch(out, stretch, generator)
     return random_scale(out, scale, generator) if scale > 0 else out
 
 

@@ -56,6 +56,9 @@ class TrainConfig:
     # Scale each scene by a factor in [1 - s, 1 + s] (wpbench.data.augment.random_scale);
     # None = the policy's default (``specs``), resolved here so config.json records the number.
     augment_scale: float | None = None
+    # Stretch drawer samples along their slide by [1 - s, 1 + s] (wpbench.data.augment.random_slide_stretch);
+    # None = the policy's default.
+    augment_stretch: float | None = None
     val_per_kind: int = 32
     final_val_per_kind: int = 200
     seed: int = 0
@@ -74,12 +77,13 @@ class TrainConfig:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.lr_schedule not in ("constant", "cosine"):
             raise ValueError(f"lr_schedule must be 'constant' or 'cosine', got {self.lr_schedule!r}")
-        if self.augment_scale is None:
-            from wpbench.training.specs import get_spec
+        from wpbench.training.specs import get_spec
 
-            self.augment_scale = get_spec(self.policy).augment_scale
-        if not 0.0 <= self.augment_scale < 1.0:
-            raise ValueError(f"augment_scale must be in [0, 1), got {self.augment_scale}")
+        for name in ("augment_scale", "augment_stretch"):
+            if getattr(self, name) is None:
+                setattr(self, name, getattr(get_spec(self.policy), name))
+            if not 0.0 <= getattr(self, name) < 1.0:
+                raise ValueError(f"{name} must be in [0, 1), got {getattr(self, name)}")
         if self.mixing_warmup is not None and not 0.0 <= self.mixing_warmup < 1.0:
             raise ValueError(f"mixing_warmup must be in [0, 1), got {self.mixing_warmup}")
         if self.max_steps is not None and self.max_steps < 1:

@@ -170,7 +170,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
                                        budget, warmup)
             batch = prepare(make_batch(train_set, next(batches)), config.num_action_points,
                             config.num_anchor_points, config.augment_yaw, generator,
-                            config.augment_mirror, config.augment_scale)
+                            config.augment_mirror, config.augment_scale, config.augment_stretch)
             output = model(batch["action"], batch["anchor"])
             loss, terms = compute_loss(output, batch, spec.loss_preset)
             optimizer.zero_grad(set_to_none=True)

@@ -28,6 +28,9 @@ class PolicySpec:
     # policies that see furniture motion: it ties a drawer's travel to the chest's size. Off for
     # TAX-Pose, trained before it existed (its block is always the same 16 cm cube).
     augment_scale: float = 0.0
+    # Random stretch of drawer samples along their slide (``random_slide_stretch``): "deeper chest,
+    # longer slide", which the uniform scale does not teach (a chest's depth is drawn on its own).
+    augment_stretch: float = 0.0
 
 
 POLICY_SPECS: dict[str, PolicySpec] = {
