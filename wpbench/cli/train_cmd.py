@@ -43,7 +43,8 @@ def train(
                                      "[default: the policy's; 0.15 for gf and the WeightedPose variants, 0 for tp]."),
     stretch: float = typer.Option(None, min=0.0, max=0.99,
                                   help="Stretch each drawer sample along its slide by a random factor in "
-                                       "[1 - STRETCH, 1 + STRETCH] [default: the policy's]."),
+                                       "[1 - STRETCH, 1 + STRETCH] [default: the policy's; 0.25 for gf and the WeightedPose "
+                                       "variants, 0 for tp]."),
     restart: bool = typer.Option(False, help="Ignore an existing checkpoint and start from scratch."),
     select_best: bool = typer.Option(False, "--select-best",
                                      help="Do not train: write WEIGHTS_ROOT/best.json from the trained WeightedPose variants."),

@@ -30,19 +30,21 @@ class PolicySpec:
     augment_scale: float = 0.0
     # Random stretch of drawer samples along their slide (``random_slide_stretch``): "deeper chest,
     # longer slide", which the uniform scale does not teach (a chest's depth is drawn on its own).
+    # On for the policies trained with the scale; TAX-Pose never sees a drawer move.
     augment_stretch: float = 0.0
 
 
 POLICY_SPECS: dict[str, PolicySpec] = {
     spec.name: spec
     for spec in (
-        PolicySpec("gf", "goalflow", "gf", (ARTICULATED,), augment_scale=0.15),
+        PolicySpec("gf", "goalflow", "gf", (ARTICULATED,), augment_scale=0.15, augment_stretch=0.25),
         PolicySpec("tp", "taxpose", "tp", (FREE,)),
-        PolicySpec("wp-og", "weightedpose", "wp-og", (ARTICULATED, FREE), ("gf", "tp"), 1e-4, 0.25, augment_scale=0.15),
+        PolicySpec("wp-og", "weightedpose", "wp-og", (ARTICULATED, FREE), ("gf", "tp"), 1e-4, 0.25, augment_scale=0.15,
+                   augment_stretch=0.25),
         PolicySpec("wp-postsvd", "weightedpose", "wp-postsvd", (ARTICULATED, FREE), ("gf", "tp"), 1e-4, 0.25,
-                   augment_scale=0.15),
+                   augment_scale=0.15, augment_stretch=0.25),
         PolicySpec("wp-postsvd-t", "weightedpose", "wp-postsvd-t", (ARTICULATED, FREE), ("gf", "tp"), 1e-4, 0.25,
-                   augment_scale=0.15),
+                   augment_scale=0.15, augment_stretch=0.25),
     )
 }
 WEIGHTED_POSE_VARIANTS = tuple(name for name, spec in POLICY_SPECS.items() if spec.model == "weightedpose")
