@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import importlib.util
 import subprocess
 import sys
@@ -272,6 +274,26 @@ def test_train_passes_model_options_to_the_model_config(wpbench_exe, tmp_path):
     assert result.returncode == 2
     assert "anchor_extnt" in result.stderr and "anchor_extent" in result.stderr
     assert not (out / "model.pt").exists()
+
+
+def test_train_records_the_scale_and_stretch_it_was_given(wpbench_exe, tmp_path):
+    from wpbench.data.synthetic import write_synthetic_split
+
+    write_synthetic_split(tmp_path / "data", "train", per_kind=2, num_action_points=32, num_anchor_points=48)
+    write_synthetic_split(tmp_path / "data", "val", per_kind=2, num_action_points=32, num_anchor_points=48, seed=1)
+    out = tmp_path / "gf"
+    result = subprocess.run([str(wpbench_exe), "train", "--policy", "gf", "--data", str(tmp_path / "data"),
+                             "--out", str(out), "--max-steps", "1", "--steps-per-epoch", "1", "--val-per-kind", "2",
+                             "--final-val-per-kind", "2", "--num-action-points", "16", "--num-anchor-points", "16",
+                             "--model-option", "encoder.emb_dim=16", "--scale", "0.05", "--stretch", "0.3"],
+                            capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    recorded = json.loads((out / "config.json").read_text())["train_config"]
+    assert (recorded["augment_scale"], recorded["augment_stretch"]) == (0.05, 0.3)
+    refused = subprocess.run([str(wpbench_exe), "train", "--policy", "gf", "--data", str(tmp_path / "data"),
+                              "--out", str(tmp_path / "other"), "--stretch", "1.5"], capture_output=True, text=True)
+    assert refused.returncode == 2 and "stretch" in refused.stderr
+    assert not (tmp_path / "other").exists()
 
 
 def test_run_weights_root_loads_the_experiment_and_writes_beside_it(runner, monkeypatch, tmp_path, repo_root):

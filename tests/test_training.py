@@ -56,18 +56,20 @@ def test_two_iterations_write_log_checkpoint_and_model(data_root):
     assert described["model_config"]["encoder"]["emb_dim"] == 16
     assert described["data"]["train_manifest_hash"]
     assert described["train_config"]["augment_scale"] == 0.15  # gf's default, recorded as a number
+    assert described["train_config"]["augment_stretch"] == 0.25
     state = torch.load(out / "model.pt", weights_only=True)
     assert all(v.dtype in (torch.float32, torch.int64) for v in state.values())
     assert (out / "model.pt").stat().st_size < 20e6
 
 
-def test_scale_augmentation_defaults_per_policy_and_rejects_a_spread_of_one(data_root):
-    assert _config(data_root, "gf").augment_scale == 0.15
-    assert _config(data_root, "wp-postsvd-t").augment_scale == 0.15
-    assert _config(data_root, "tp").augment_scale == 0.0  # the shipped TAX-Pose was trained without it
-    assert _config(data_root, "tp", augment_scale=0.1).augment_scale == 0.1
-    with pytest.raises(ValueError, match="augment_scale"):
-        _config(data_root, "gf", augment_scale=1.0)
+@pytest.mark.parametrize("name, default", [("augment_scale", 0.15), ("augment_stretch", 0.25)])
+def test_scale_and_stretch_default_per_policy_and_reject_a_spread_of_one(data_root, name, default):
+    assert getattr(_config(data_root, "gf"), name) == default
+    assert getattr(_config(data_root, "wp-postsvd-t"), name) == default
+    assert getattr(_config(data_root, "tp"), name) == 0.0  # the shipped TAX-Pose was trained without them
+    assert getattr(_config(data_root, "tp", **{name: 0.1}), name) == 0.1
+    with pytest.raises(ValueError, match=name):
+        _config(data_root, "gf", **{name: 1.0})
 
 
 def test_an_interrupted_run_resumes_from_its_checkpoint(data_root):

@@ -36,6 +36,8 @@ import math
 
 import torch
 
+from wpbench.data.config import ARTICULATED, KIND_CODE
+
 
 def yaw_rotations(angles: torch.Tensor) -> torch.Tensor:
     """(B,) radians -> (B, 4, 4) rotations about z."""
@@ -109,7 +111,7 @@ def sliding_samples(batch: dict[str, torch.Tensor], min_travel: float = 0.01) ->
         E = batch["gt_equivalents"].to(torch.float64)
         pure &= (E[..., :3, :3] - eye).abs().flatten(1).amax(dim=1) < 1e-5
     moving = T[:, :3, 3].norm(dim=1) > min_travel
-    return (batch["kind"] == 0) & pure & moving
+    return (batch["kind"] == KIND_CODE[ARTICULATED]) & pure & moving
 
 
 def random_slide_stretch(
@@ -119,7 +121,7 @@ def random_slide_stretch(
     direction by its own factor, uniform in ``[1 - spread, 1 + spread]`` (0 <= spread < 1),
     about the anchor's centroid; other samples are passed through.
 
-    batch: as for :func:`random_yaw`, plus ``kind`` (B,) (0 articulated); the goal
+    batch: as for :func:`random_yaw`, plus ``kind`` (B,) (``KIND_CODE``); the goal
     translations of the stretched samples (``gt_transform`` and ``gt_equivalents``) are
     multiplied by their factor.
     """
