@@ -93,12 +93,7 @@ def random_scale(
     out = dict(batch)
     for key in ("action", "anchor"):
         out[key] = batch[key] * factor.to(batch[key].dtype)[:, None, None]
-    for key, shape in (("gt_transform", (B, 1)), ("gt_equivalents", (B, 1, 1))):
-        if key in batch:
-            T = batch[key].clone()
-            T[..., :3, 3] = T[..., :3, 3] * factor.to(T.dtype).view(*shape)
-            out[key] = T
-    return out
+    return _scale_goal_translations(batch, out, factor)
 
 
 def sliding_samples(batch: dict[str, torch.Tensor], min_travel: float = 0.01) -> torch.Tensor:
@@ -140,9 +135,17 @@ def random_slide_stretch(
     for key in ("action", "anchor"):
         points = batch[key].to(torch.float64)
         out[key] = ((points - centre) @ S.transpose(1, 2) + centre).to(batch[key].dtype)
-    for key, shape in (("gt_transform", (B, 1)), ("gt_equivalents", (B, 1, 1))):
+    return _scale_goal_translations(batch, out, factor)
+
+
+def _scale_goal_translations(batch: dict[str, torch.Tensor], out: dict[str, torch.Tensor],
+                             factor: torch.Tensor) -> dict[str, torch.Tensor]:
+    """Write into ``out`` the goals of ``batch`` (``gt_transform`` (B, 4, 4), ``gt_equivalents``
+    (B, K, 4, 4) if present) with their translations multiplied by ``factor`` (B,); returns ``out``."""
+    for key in ("gt_transform", "gt_equivalents"):
         if key in batch:
             T = batch[key].clone()
-            T[..., :3, 3] = T[..., :3, 3] * factor.to(T.dtype).view(*shape)
+            per_sample = factor.to(T.dtype).view(-1, *([1] * (T.dim() - 2)))  # (B, 1) or (B, 1, 1)
+            T[..., :3, 3] = T[..., :3, 3] * per_sample
             out[key] = T
     return out
