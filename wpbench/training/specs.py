@@ -30,7 +30,9 @@ class PolicySpec:
     augment_scale: float = 0.0
     # Random stretch of drawer samples along their slide (``random_slide_stretch``): "deeper chest,
     # longer slide", which the uniform scale does not teach (a chest's depth is drawn on its own).
-    # On for the policies trained with the scale; TAX-Pose never sees a drawer move.
+    # On for gf and the WeightedPose variants because their shipped weights were trained with it (a
+    # same-day control without it did as well on val: results/experiments/README.md); TAX-Pose never
+    # sees a drawer move.
     augment_stretch: float = 0.0
 
 
