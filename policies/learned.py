@@ -78,11 +78,12 @@ class LearnedPolicy(Policy):
         self.config = config
         import torch
 
-        from wpbench.models.subset_ensemble import fuse_goal_clouds
+        from wpbench.models.subset_ensemble import fuse_goal_clouds, subsets_worth_drawing
         from wpbench.training.artifacts import load_trained_model
 
         self._torch = torch
         self._fuse = fuse_goal_clouds
+        self._subsets_worth_drawing = subsets_worth_drawing
         self.model, self.model_config = load_trained_model(config.weights_dir, config.policy)
         self.num_action_points = int(self.model_config["num_action_points"])
         self.num_anchor_points = int(self.model_config["num_anchor_points"])
@@ -109,8 +110,8 @@ class LearnedPolicy(Policy):
         action = _cloud(obs, "action_points")
         anchor = _cloud(obs, "anchor_points")
         rng = np.random.default_rng(self.config.seed)
-        # Clouds no larger than the model's input give one subset only: every subset would be the same.
-        count = self.config.subsets if (len(action) > self.num_action_points or len(anchor) > self.num_anchor_points) else 1
+        count = self._subsets_worth_drawing(self.config.subsets, (len(action), len(anchor)),
+                                            (self.num_action_points, self.num_anchor_points))
         picks = [(self._subsample(action, self.num_action_points, rng), self._subsample(anchor, self.num_anchor_points, rng))
                  for _ in range(count)]
         with torch.no_grad():

@@ -260,14 +260,35 @@ def test_model_options_become_nested_overrides_and_bad_ones_say_how():
         parse_model_options(["anchor_extent=yes please"])
 
 
-def test_train_passes_model_options_to_the_model_config(wpbench_exe, tmp_path):
-    """A typo in an option is refused with the valid names before anything is written."""
+@pytest.fixture
+def tiny_data(tmp_path):
+    """A synthetic data folder (train and val, 2 samples per kind) small enough for a 1-step training."""
     from wpbench.data.synthetic import write_synthetic_split
 
     write_synthetic_split(tmp_path / "data", "train", per_kind=2, num_action_points=32, num_anchor_points=48)
     write_synthetic_split(tmp_path / "data", "val", per_kind=2, num_action_points=32, num_anchor_points=48, seed=1)
+    return tmp_path / "data"
+
+
+@pytest.fixture
+def captured_runs(monkeypatch):
+    """``wpbench run`` stops before simulating; the list holds the run configs it would have run."""
+    import wpbench.evaluation.runner as runner_module
+
+    seen = []
+
+    def fake_run_benchmark(cfg, **_):
+        seen.append(cfg)
+        raise ValueError("stopped by the test")
+
+    monkeypatch.setattr(runner_module, "run_benchmark", fake_run_benchmark)
+    return seen
+
+
+def test_train_passes_model_options_to_the_model_config(wpbench_exe, tmp_path, tiny_data):
+    """A typo in an option is refused with the valid names before anything is written."""
     out = tmp_path / "gf"
-    result = subprocess.run([str(wpbench_exe), "train", "--policy", "gf", "--data", str(tmp_path / "data"),
+    result = subprocess.run([str(wpbench_exe), "train", "--policy", "gf", "--data", str(tiny_data),
                              "--out", str(out), "--model-option", "anchor_extnt=true"],
                             capture_output=True, text=True)
     assert result.returncode == 2
@@ -275,13 +296,9 @@ def test_train_passes_model_options_to_the_model_config(wpbench_exe, tmp_path):
     assert not (out / "model.pt").exists()
 
 
-def test_train_records_the_scale_and_stretch_it_was_given(wpbench_exe, tmp_path):
-    from wpbench.data.synthetic import write_synthetic_split
-
-    write_synthetic_split(tmp_path / "data", "train", per_kind=2, num_action_points=32, num_anchor_points=48)
-    write_synthetic_split(tmp_path / "data", "val", per_kind=2, num_action_points=32, num_anchor_points=48, seed=1)
+def test_train_records_the_scale_and_stretch_it_was_given(wpbench_exe, tmp_path, tiny_data):
     out = tmp_path / "gf"
-    result = subprocess.run([str(wpbench_exe), "train", "--policy", "gf", "--data", str(tmp_path / "data"),
+    result = subprocess.run([str(wpbench_exe), "train", "--policy", "gf", "--data", str(tiny_data),
                              "--out", str(out), "--max-steps", "1", "--steps-per-epoch", "1", "--val-per-kind", "2",
                              "--final-val-per-kind", "2", "--num-action-points", "16", "--num-anchor-points", "16",
                              "--model-option", "encoder.emb_dim=16", "--scale", "0.05", "--stretch", "0.3"],
@@ -289,31 +306,23 @@ def test_train_records_the_scale_and_stretch_it_was_given(wpbench_exe, tmp_path)
     assert result.returncode == 0, result.stderr
     recorded = json.loads((out / "config.json").read_text())["train_config"]
     assert (recorded["augment_scale"], recorded["augment_stretch"]) == (0.05, 0.3)
-    refused = subprocess.run([str(wpbench_exe), "train", "--policy", "gf", "--data", str(tmp_path / "data"),
+    refused = subprocess.run([str(wpbench_exe), "train", "--policy", "gf", "--data", str(tiny_data),
                               "--out", str(tmp_path / "other"), "--stretch", "1.5"], capture_output=True, text=True)
     assert refused.returncode == 2 and "stretch" in refused.stderr
     assert not (tmp_path / "other").exists()
 
 
-def test_run_weights_root_loads_the_experiment_and_writes_beside_it(runner, monkeypatch, tmp_path, repo_root):
+def test_run_weights_root_loads_the_experiment_and_writes_beside_it(runner, captured_runs, tmp_path, repo_root):
     """--weights-root: the policy loads from that folder, the run goes to <root>/runs/."""
     import shutil
 
-    import wpbench.evaluation.runner as runner_module
     from policies.registry import make_policy
 
     root = tmp_path / "experiment"
     shutil.copytree(repo_root / "policies" / "weights" / "gf", root / "gf", ignore=shutil.ignore_patterns("checkpoint.pt"))
-    seen = []
-
-    def fake_run_benchmark(cfg, **_):
-        seen.append(cfg)
-        raise ValueError("stopped by the test")
-
-    monkeypatch.setattr(runner_module, "run_benchmark", fake_run_benchmark)
     result = runner.invoke(cli.app, ["run", "--policy", "gf", "--task", "open-door", "--weights-root", str(root)])
     assert result.exit_code == 2 and "stopped by the test" in result.output
-    (cfg,) = seen
+    (cfg,) = captured_runs
     assert cfg.out == root / "runs" / "gf__open-door__val__procedural__camera"
     assert make_policy(cfg.policy, **cfg.policy_kwargs).config.weights_dir == root / "gf"
 
@@ -321,24 +330,16 @@ def test_run_weights_root_loads_the_experiment_and_writes_beside_it(runner, monk
     assert refused.exit_code == 2 and "applies to the trained policies" in refused.output
     missing = runner.invoke(cli.app, ["run", "--policy", "gf", "--weights-root", str(tmp_path / "nowhere")])
     assert missing.exit_code == 2 and "wpbench train --policy NAME --weights-root" in missing.output
-    assert len(seen) == 1
+    assert len(captured_runs) == 1
 
 
-def test_run_subsets_reaches_the_learned_policy_and_is_refused_for_the_others(runner, monkeypatch):
-    import wpbench.evaluation.runner as runner_module
+def test_run_subsets_reaches_the_learned_policy_and_is_refused_for_the_others(runner, captured_runs):
     from policies.registry import make_policy
 
-    seen = []
-
-    def fake_run_benchmark(cfg, **_):
-        seen.append(cfg)
-        raise ValueError("stopped by the test")
-
-    monkeypatch.setattr(runner_module, "run_benchmark", fake_run_benchmark)
     result = runner.invoke(cli.app, ["run", "--policy", "oracle", "--task", "open-door", "--subsets", "2"])
     assert result.exit_code == 2 and "stopped by the test" in result.output
-    policy = make_policy(seen[0].policy, **seen[0].policy_kwargs)
+    policy = make_policy(captured_runs[0].policy, **captured_runs[0].policy_kwargs)
     assert {expert.config.subsets for expert in policy.experts.values()} == {2}
     refused = runner.invoke(cli.app, ["run", "--policy", "identity", "--subsets", "2"])
     assert refused.exit_code == 2 and "--subsets applies to the trained policies" in refused.output
-    assert len(seen) == 1
+    assert len(captured_runs) == 1

@@ -25,6 +25,13 @@ import torch
 from wpbench.geometry.procrustes import weighted_procrustes
 
 
+def subsets_worth_drawing(subsets: int, observed: tuple[int, int], model_input: tuple[int, int]) -> int:
+    """How many subsets to answer: ``subsets``, or 1 when neither observed cloud (action,
+    anchor point counts) is larger than the model's input, since every subset would be the
+    whole cloud and the same answer."""
+    return subsets if any(n > m for n, m in zip(observed, model_input)) else 1
+
+
 def fuse_goal_clouds(points: torch.Tensor, transforms: torch.Tensor) -> torch.Tensor:
     """The rigid transform taking ``points`` closest to the mean of their K predicted goals.
 

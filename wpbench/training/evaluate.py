@@ -20,7 +20,7 @@ from wpbench.data.config import KIND_CODE, KINDS
 from wpbench.data.dataset import CrossPoseDataset
 from wpbench.data.equivalent_goals import nearest_goal
 from wpbench.geometry import metrics
-from wpbench.models.subset_ensemble import fuse_goal_clouds
+from wpbench.models.subset_ensemble import fuse_goal_clouds, subsets_worth_drawing
 from wpbench.training.batches import make_batch, subsample_points
 
 
@@ -53,11 +53,12 @@ def per_sample_errors(
             anchor = subsample_points(batch["anchor"], num_anchor, generator)
             output = model(action, anchor)
             T_pred = output.transform.double()
-            # Clouds no larger than the model's input would give the same subset every time.
-            if subsets > 1 and (batch["action"].shape[1] > num_action or batch["anchor"].shape[1] > num_anchor):
+            count = subsets_worth_drawing(subsets, (batch["action"].shape[1], batch["anchor"].shape[1]),
+                                          (num_action, num_anchor))
+            if count > 1:
                 more = [model(subsample_points(batch["action"], num_action, generator),
                               subsample_points(batch["anchor"], num_anchor, generator)).transform.double()
-                        for _ in range(subsets - 1)]
+                        for _ in range(count - 1)]
                 action = batch["action"]
                 T_pred = fuse_goal_clouds(action.double(), torch.stack([T_pred, *more]))
             if "w" in output.diagnostics:
