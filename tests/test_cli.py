@@ -296,16 +296,17 @@ def test_train_passes_model_options_to_the_model_config(wpbench_exe, tmp_path, t
     assert not (out / "model.pt").exists()
 
 
-def test_train_records_the_scale_and_stretch_it_was_given(wpbench_exe, tmp_path, tiny_data):
+def test_train_records_the_augmentation_and_retarget_gate_it_was_given(wpbench_exe, tmp_path, tiny_data):
     out = tmp_path / "gf"
     result = subprocess.run([str(wpbench_exe), "train", "--policy", "gf", "--data", str(tiny_data),
                              "--out", str(out), "--max-steps", "1", "--steps-per-epoch", "1", "--val-per-kind", "2",
                              "--final-val-per-kind", "2", "--num-action-points", "16", "--num-anchor-points", "16",
-                             "--model-option", "encoder.emb_dim=16", "--scale", "0.05", "--stretch", "0.3"],
+                             "--model-option", "encoder.emb_dim=16", "--scale", "0.05", "--stretch", "0.3",
+                             "--retarget-within", "90"],
                             capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     recorded = json.loads((out / "config.json").read_text())["train_config"]
-    assert (recorded["augment_scale"], recorded["augment_stretch"]) == (0.05, 0.3)
+    assert (recorded["augment_scale"], recorded["augment_stretch"], recorded["retarget_within_deg"]) == (0.05, 0.3, 90)
     refused = subprocess.run([str(wpbench_exe), "train", "--policy", "gf", "--data", str(tiny_data),
                               "--out", str(tmp_path / "other"), "--stretch", "1.5"], capture_output=True, text=True)
     assert refused.returncode == 2 and "stretch" in refused.stderr

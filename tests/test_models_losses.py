@@ -115,3 +115,30 @@ def test_every_weightedpose_preset_trains_the_mixing_weight():
     assert _mixing_head_gradient("wp-og") > 0.0
     assert _mixing_head_gradient("wp-postsvd") > 0.0
     assert _mixing_head_gradient("wp-postsvd-t") > 0.0
+
+
+def _turn_about_z(degrees: float, batch: int) -> torch.Tensor:
+    angle = torch.tensor(degrees, dtype=torch.float64).deg2rad()
+    c, s = torch.cos(angle), torch.sin(angle)
+    R = torch.stack([torch.stack([c, -s, 0 * c]), torch.stack([s, c, 0 * c]), torch.tensor([0.0, 0.0, 1.0]).double()])
+    return se3.make_transform(R.expand(batch, 3, 3), torch.zeros(batch, 3, dtype=torch.float64))
+
+
+def test_the_retarget_gate_decides_whether_another_equivalent_goal_counts():
+    """Stored goal T, an equally correct goal T turned 90 deg (as for a cube), a prediction turned
+    60 deg: 30 deg from the other goal. A 15 deg gate trains it towards the stored goal; a 180 deg
+    gate (always the nearest) towards the other, exactly as if that were the only goal."""
+    data = scene(batch=2, dtype=torch.float64)
+    T = data["gt_transform"]
+    other = T @ _turn_about_z(90.0, 2)
+    data["gt_equivalents"] = torch.stack([T, other], dim=1)
+    output = _perfect_output(data)
+    output.transform = T @ _turn_about_z(60.0, 2)
+    stored_only, _ = compute_loss(output, data, "wp-postsvd-t", retarget_within_deg=15.0)
+    nearest, _ = compute_loss(output, data, "wp-postsvd-t", retarget_within_deg=180.0)
+    only_stored = {k: v for k, v in data.items() if k != "gt_equivalents"}
+    against_stored, _ = compute_loss(output, only_stored, "wp-postsvd-t")
+    against_other, _ = compute_loss(output, {**only_stored, "gt_transform": other}, "wp-postsvd-t")
+    torch.testing.assert_close(stored_only, against_stored)
+    torch.testing.assert_close(nearest, against_other)
+    assert nearest.item() < stored_only.item()

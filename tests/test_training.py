@@ -10,6 +10,7 @@ import pytest
 import torch
 
 from wpbench.data.synthetic import write_synthetic_split
+from wpbench.models.loss_presets import RETARGET_WITHIN_DEG
 from wpbench.training.config import TrainConfig
 from wpbench.training.loop import train
 
@@ -70,6 +71,13 @@ def test_scale_and_stretch_default_per_policy_and_reject_a_spread_of_one(data_ro
     assert getattr(_config(data_root, "tp", **{name: 0.1}), name) == 0.1
     with pytest.raises(ValueError, match=name):
         _config(data_root, "gf", **{name: 1.0})
+
+
+def test_the_retarget_gate_is_recorded_per_policy_and_must_be_an_angle(data_root):
+    assert _config(data_root, "tp").retarget_within_deg == RETARGET_WITHIN_DEG
+    assert _config(data_root, "tp", retarget_within_deg=180.0).retarget_within_deg == 180.0
+    with pytest.raises(ValueError, match="retarget_within_deg"):
+        _config(data_root, "gf", retarget_within_deg=200.0)
 
 
 def test_an_interrupted_run_resumes_from_its_checkpoint(data_root):

@@ -45,6 +45,10 @@ def train(
                                   help="Stretch each drawer sample along its slide by a random factor in "
                                        "[1 - STRETCH, 1 + STRETCH] [default: the policy's; 0.25 for gf and the WeightedPose "
                                        "variants, 0 for tp]."),
+    retarget_within: float = typer.Option(
+        None, min=0.0, max=180.0,
+        help="Symmetric objects: train towards another equivalent goal once the prediction is within this "
+             "many degrees of it; 180 = always the nearest [default: the policy's]."),
     restart: bool = typer.Option(False, help="Ignore an existing checkpoint and start from scratch."),
     select_best: bool = typer.Option(False, "--select-best",
                                      help="Do not train: write WEIGHTS_ROOT/best.json from the trained WeightedPose variants."),
@@ -76,7 +80,7 @@ def train(
             steps_per_epoch=steps_per_epoch, batch_size=batch_size, learning_rate=learning_rate, mixing_warmup=mixing_warmup,
             lr_schedule=lr_schedule,
             num_action_points=num_action_points, num_anchor_points=num_anchor_points, augment_yaw=augment, augment_mirror=mirror, augment_scale=scale,
-            augment_stretch=stretch,
+            augment_stretch=stretch, retarget_within_deg=retarget_within,
             val_per_kind=val_per_kind, final_val_per_kind=final_val_per_kind, seed=seed, threads=threads,
             model_overrides=overrides,
         )

@@ -37,7 +37,8 @@ from wpbench.models.output import CrossPoseOutput
 
 PoseForTaxPoseTerms = Literal["output", "taxpose_branch"]
 
-# A symmetric object's other goals count only once the output is this close to one of them.
+# A symmetric object's other goals count only once the output is this close to one of them
+# (the default; a policy can choose its own, ``wpbench.training.specs``). 180 = every goal counts.
 RETARGET_WITHIN_DEG = 15.0
 
 
@@ -126,14 +127,17 @@ def _check_batch(output: CrossPoseOutput, batch: dict[str, torch.Tensor]) -> Non
 
 
 def compute_loss(
-    output: CrossPoseOutput, batch: dict[str, torch.Tensor], preset: str | LossPreset
+    output: CrossPoseOutput,
+    batch: dict[str, torch.Tensor],
+    preset: str | LossPreset,
+    retarget_within_deg: float = RETARGET_WITHIN_DEG,
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """Total loss and its named, unweighted terms (detached, for logging).
 
     output: the model's CrossPoseOutput for ``batch["action"]``, ``batch["anchor"]``.
     batch: ``action`` (B,NA,3), ``anchor`` (B,NB,3), ``gt_transform`` (B,4,4), and optionally
     ``gt_equivalents`` (B,K,4,4): then every term compares against the equivalent goal nearest
-    to the output among those within ``RETARGET_WITHIN_DEG`` of it, else the stored goal (a
+    to the output among those within ``retarget_within_deg`` of it, else the stored goal (a
     symmetric object's goals are all correct; see ``equivalent_goals``).
     Raises ValueError if the model lacks a diagnostic the preset needs
     (e.g. ``tp`` on a Goal Flow model).
@@ -143,7 +147,7 @@ def compute_loss(
     action, anchor, T_gt = batch["action"], batch["anchor"], batch["gt_transform"].to(output.transform.dtype)
     T_out = output.transform
     if "gt_equivalents" in batch:
-        T_gt = nearest_goal(T_out, batch["gt_equivalents"], within_deg=RETARGET_WITHIN_DEG).to(T_out.dtype)
+        T_gt = nearest_goal(T_out, batch["gt_equivalents"], within_deg=retarget_within_deg).to(T_out.dtype)
     T_tax = output.require("taxpose_transform") if preset.taxpose_pose == "taxpose_branch" else T_out
 
     term_functions = {

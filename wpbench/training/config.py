@@ -59,6 +59,8 @@ class TrainConfig:
     # Stretch drawer samples along their slide by [1 - s, 1 + s] (wpbench.data.augment.random_slide_stretch);
     # None = the policy's default.
     augment_stretch: float | None = None
+    # Gate (deg) for retargeting a symmetric object to another equivalent goal; None = the policy's.
+    retarget_within_deg: float | None = None
     val_per_kind: int = 32
     final_val_per_kind: int = 200
     seed: int = 0
@@ -84,6 +86,10 @@ class TrainConfig:
                 setattr(self, name, getattr(get_spec(self.policy), name))
             if not 0.0 <= getattr(self, name) < 1.0:
                 raise ValueError(f"{name} must be in [0, 1), got {getattr(self, name)}")
+        if self.retarget_within_deg is None:
+            self.retarget_within_deg = get_spec(self.policy).retarget_within_deg
+        if not 0.0 <= self.retarget_within_deg <= 180.0:
+            raise ValueError(f"retarget_within_deg must be in [0, 180] degrees, got {self.retarget_within_deg}")
         if self.mixing_warmup is not None and not 0.0 <= self.mixing_warmup < 1.0:
             raise ValueError(f"mixing_warmup must be in [0, 1), got {self.mixing_warmup}")
         if self.max_steps is not None and self.max_steps < 1:

@@ -172,7 +172,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
                             config.num_anchor_points, config.augment_yaw, generator,
                             config.augment_mirror, config.augment_scale, config.augment_stretch)
             output = model(batch["action"], batch["anchor"])
-            loss, terms = compute_loss(output, batch, spec.loss_preset)
+            loss, terms = compute_loss(output, batch, spec.loss_preset, config.retarget_within_deg)
             optimizer.zero_grad(set_to_none=True)
             if not torch.isfinite(loss):
                 skipped += 1  # a degenerate SVD in one batch must not poison the weights

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from wpbench.data.config import ARTICULATED, FREE
+from wpbench.models.loss_presets import RETARGET_WITHIN_DEG
 
 
 @dataclass(frozen=True)
@@ -34,6 +35,9 @@ class PolicySpec:
     # same-day control without it did as well on val: results/experiments/README.md); TAX-Pose never
     # sees a drawer move.
     augment_stretch: float = 0.0
+    # A symmetric object's other equivalent goals become the training target once the prediction
+    # is within this angle of one of them (``loss_presets.compute_loss``); 180 = always the nearest.
+    retarget_within_deg: float = RETARGET_WITHIN_DEG
 
 
 POLICY_SPECS: dict[str, PolicySpec] = {
