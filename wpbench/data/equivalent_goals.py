@@ -11,6 +11,10 @@ one turned 46 degrees look alike, and a model that is nearly right for either
 should not be pulled towards a target 88 degrees away. Without that gate an
 untrained model, whose pose is arbitrary, would get a different target on every
 step, and per-point heads would learn the average of the 24 goals: the centre.
+The gate has a cost once a model is trained: the stored goal of a block turned
+near 45 degrees flips between two sides, and a gated target teaches the network
+to average them. Models that start from trained weights (the WeightedPose
+variants) therefore train with no gate (``within_deg`` 180; ``training.specs``).
 
 Only the discrete part of a group is enumerated: an object with a continuous
 axis (a disk, a bowl) gets its discrete elements, which is exact for none of
