@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The three WeightedPose variants, trained at once (one core shared by 1.5 trainings) from a
+# The three WeightedPose variants, trained at once (three processes on the two cores) from a
 # trained Goal Flow and TAX-Pose, then `--select-best`: how every shipped release was made.
 #   scripts/train_weightedpose.sh ROOT [GF_DIR] [TP_DIR]
 # ROOT receives gf/ and tp/ (copies of GF_DIR and TP_DIR, default policies/weights/{gf,tp}, without
