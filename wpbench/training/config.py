@@ -81,13 +81,13 @@ class TrainConfig:
             raise ValueError(f"lr_schedule must be 'constant' or 'cosine', got {self.lr_schedule!r}")
         from wpbench.training.specs import get_spec
 
-        for name in ("augment_scale", "augment_stretch"):
+        spec = get_spec(self.policy)
+        for name in ("augment_scale", "augment_stretch", "retarget_within_deg"):  # None = the policy's default
             if getattr(self, name) is None:
-                setattr(self, name, getattr(get_spec(self.policy), name))
+                setattr(self, name, getattr(spec, name))
+        for name in ("augment_scale", "augment_stretch"):
             if not 0.0 <= getattr(self, name) < 1.0:
                 raise ValueError(f"{name} must be in [0, 1), got {getattr(self, name)}")
-        if self.retarget_within_deg is None:
-            self.retarget_within_deg = get_spec(self.policy).retarget_within_deg
         if not 0.0 <= self.retarget_within_deg <= 180.0:
             raise ValueError(f"retarget_within_deg must be in [0, 180] degrees, got {self.retarget_within_deg}")
         if self.mixing_warmup is not None and not 0.0 <= self.mixing_warmup < 1.0:
