@@ -74,9 +74,9 @@ def test_scale_and_stretch_default_per_policy_and_reject_a_spread_of_one(data_ro
 
 
 def test_the_retarget_gate_is_recorded_per_policy_and_must_be_an_angle(data_root):
-    assert _config(data_root, "tp").retarget_within_deg == RETARGET_WITHIN_DEG
-    assert _config(data_root, "wp-postsvd-t").retarget_within_deg == 180.0  # starts from a trained TAX-Pose
-    assert _config(data_root, "tp", retarget_within_deg=180.0).retarget_within_deg == 180.0
+    assert _config(data_root, "tp").retarget_within_deg == RETARGET_WITHIN_DEG == 180.0  # always the nearest goal
+    assert _config(data_root, "wp-postsvd-t").retarget_within_deg == 180.0
+    assert _config(data_root, "tp", retarget_within_deg=15.0).retarget_within_deg == 15.0
     with pytest.raises(ValueError, match="retarget_within_deg"):
         _config(data_root, "gf", retarget_within_deg=200.0)
 

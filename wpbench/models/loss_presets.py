@@ -38,8 +38,11 @@ from wpbench.models.output import CrossPoseOutput
 PoseForTaxPoseTerms = Literal["output", "taxpose_branch"]
 
 # A symmetric object's other goals count only once the output is this close to one of them
-# (the default; a policy can choose its own, ``wpbench.training.specs``). 180 = every goal counts.
-RETARGET_WITHIN_DEG = 15.0
+# (the default; a policy can choose its own, ``wpbench.training.specs``). 180 = every goal counts:
+# the nearest equivalent goal is always the target. A gate (the 15 deg of earlier releases) makes
+# the target flip where the stored goal flips (a cube's at a 45 deg turn), and the network learns
+# the average of both sides (results/experiments/README.md, "symmetric-goal gate").
+RETARGET_WITHIN_DEG = 180.0
 
 
 @dataclass(frozen=True)
