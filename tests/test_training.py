@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import time
 
 import pytest
 import torch
@@ -79,6 +80,25 @@ def test_the_retarget_gate_is_recorded_per_policy_and_must_be_an_angle(data_root
     assert _config(data_root, "tp", retarget_within_deg=15.0).retarget_within_deg == 15.0
     with pytest.raises(ValueError, match="retarget_within_deg"):
         _config(data_root, "gf", retarget_within_deg=200.0)
+
+
+def test_the_budget_counts_the_time_spent_saving_the_log(data_root, monkeypatch, tmp_path):
+    """Wall time, not only the steps: a slow disk or plot makes the run stop sooner and shows
+    in train_wall_s (the README's training minutes are what a user waits)."""
+    from wpbench.training import log as train_log
+
+    write_log = train_log.write_log
+
+    def slow_write_log(out, rows):
+        write_log(out, rows)
+        time.sleep(0.4)
+
+    monkeypatch.setattr(train_log, "write_log", slow_write_log)
+    config = _config(data_root, "gf", out=tmp_path / "slow", max_steps=None, minutes=1.0 / 60)  # one second
+    metrics = train(config, echo=lambda _: None)
+    epochs = len(_rows(config.out))
+    assert 1 <= epochs <= 3  # a one-second budget holds at most three 0.4 s writes (uncounted: dozens of epochs)
+    assert metrics["train_wall_s"] >= 0.4 * epochs
 
 
 def test_an_interrupted_run_resumes_from_its_checkpoint(data_root):
