@@ -17,8 +17,8 @@ def default_weights_root() -> Path:
 class TrainConfig:
     """A training run of ``policy`` on ``data`` for at most ``minutes`` of wall time.
 
-    minutes: budget for the training epochs, summed over resumed runs (the final
-        validation runs after it).
+    minutes: wall-time budget of the training epochs (steps, validations, checkpoints and
+        logs), summed over resumed runs; the final validation runs after it.
     max_steps: optional cap on optimiser steps (tests use 2).
     steps_per_epoch: optimiser steps between validations / checkpoints (an "epoch"
         here is this many steps, so a run that cannot see all data still logs
