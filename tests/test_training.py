@@ -98,7 +98,7 @@ def test_the_budget_counts_the_time_spent_saving_the_log(data_root, monkeypatch,
     metrics = train(config, echo=lambda _: None)
     epochs = len(_rows(config.out))
     assert 1 <= epochs <= 3  # a one-second budget holds at most three 0.4 s writes (uncounted: dozens of epochs)
-    assert metrics["train_wall_s"] >= 0.4 * epochs
+    assert metrics["train_wall_s"] >= 0.4 * epochs - 0.05  # train_wall_s is rounded to 0.1 s
 
 
 def test_an_interrupted_run_resumes_from_its_checkpoint(data_root):
