@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -383,6 +384,55 @@ def test_fusing_two_translations_gives_their_mean_and_two_turns_the_half_turn():
         turns.append(se3.make_transform(R, c - R @ c))
     fused = fuse_goal_clouds(points, torch.stack(turns)[:, None])
     torch.testing.assert_close(fused[0], torch.eye(4, dtype=torch.float64), atol=1e-9, rtol=0)
+
+
+def _turn_about(c: torch.Tensor, angle_rad: float) -> torch.Tensor:
+    R = roma.rotvec_to_rotmat(torch.tensor([0.0, 0.0, angle_rad], dtype=torch.float64))
+    return se3.make_transform(R, c - R @ c)
+
+
+def test_consensus_averages_half_of_the_subsets_but_at_least_two():
+    from wpbench.models.subset_ensemble import consensus_size
+
+    assert [consensus_size(k) for k in (1, 2, 3, 4, 5, 8)] == [1, 2, 2, 2, 2, 4]
+
+
+def test_fusing_keeps_one_of_two_equivalent_goals_instead_of_their_midpoint():
+    from wpbench.models.subset_ensemble import fuse_goal_clouds
+
+    # A cube's goals a quarter turn apart: two subsets answer +40 deg, two -40 deg. The plain
+    # mean of the four goal clouds would be the 0 deg turn, 40 deg from both correct answers.
+    g = torch.Generator().manual_seed(3)
+    points = torch.randn(1, 40, 3, generator=g, dtype=torch.float64)
+    c = points[0].mean(dim=0)
+    plus, minus = _turn_about(c, math.radians(40.0)), _turn_about(c, math.radians(-40.0))
+    fused = fuse_goal_clouds(points, torch.stack([plus, minus, minus, plus])[:, None])[0]
+    assert min(torch.dist(fused, plus), torch.dist(fused, minus)) < 1e-9
+
+
+def test_fusing_ignores_a_subset_that_disagrees():
+    from wpbench.models.subset_ensemble import fuse_goal_clouds
+
+    g = torch.Generator().manual_seed(5)
+    points = torch.randn(1, 40, 3, generator=g, dtype=torch.float64)
+    c = points[0].mean(dim=0)
+    close = [_turn_about(c, math.radians(a)) for a in (29.8, 30.0, 30.2)]
+    fused = fuse_goal_clouds(points, torch.stack([close[0], _turn_about(c, math.radians(-60.0)), *close[1:]])[:, None])
+    angle = math.degrees(math.atan2(fused[0, 1, 0].item(), fused[0, 0, 0].item()))
+    assert 29.8 <= angle <= 30.2
+
+
+@given(seed=st.integers(0, 2**31 - 1), k=st.integers(1, 6))
+@settings(deadline=None, max_examples=30)
+def test_fusing_does_not_depend_on_the_order_of_the_subsets(seed, k):
+    from wpbench.models.subset_ensemble import fuse_goal_clouds
+
+    g = torch.Generator().manual_seed(seed)
+    points = torch.randn(2, 30, 3, generator=g, dtype=torch.float64)
+    T = se3.make_transform(roma.random_rotmat(k * 2, dtype=torch.float64), torch.randn(k * 2, 3, generator=g, dtype=torch.float64))
+    T = T.reshape(k, 2, 4, 4)
+    order = torch.randperm(k, generator=g)
+    torch.testing.assert_close(fuse_goal_clouds(points, T[order]), fuse_goal_clouds(points, T), atol=1e-9, rtol=0)
 
 
 def test_fusing_checks_shapes():

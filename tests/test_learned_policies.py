@@ -68,7 +68,7 @@ def test_subset_ensemble_fuses_several_subsets_and_one_subset_is_the_single_pass
     obs = _obs(seed=3)
     one, four = single.predict(obs).transform, fused.predict(obs).transform
     _assert_rigid(four)
-    # subsets=1 is the model on the first subset; the fused answer is the Kabsch fit to the mean of four.
+    # subsets=1 is the model on the first subset; the fused answer is the consensus of the four.
     rng = np.random.default_rng(0)
     picks = [(single._subsample(obs["action_points"], single.num_action_points, rng),
               single._subsample(obs["anchor_points"], single.num_anchor_points, rng)) for _ in range(4)]

@@ -23,7 +23,7 @@ MixingWeightMode = Literal["per_sample", "per_point"]
 HeadingSource = Literal["centroids", "action_panel"]
 HEADING_SOURCES: tuple[str, ...] = ("centroids", "action_panel")
 # Random point subsets a learned policy answers and fuses into one pose (``wpbench.models.subset_ensemble``).
-DEFAULT_SUBSETS = 4
+DEFAULT_SUBSETS = 8
 
 
 @dataclass(frozen=True)
