@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import torch
 
+from wpbench.geometry import se3
 from wpbench.geometry.procrustes import weighted_procrustes
 
 
@@ -65,14 +66,13 @@ def fuse_goal_clouds(points: torch.Tensor, transforms: torch.Tensor) -> torch.Te
         raise ValueError(f"transforms must be (K, B, 4, 4) with B = {points.shape[0]}, got {tuple(transforms.shape)}")
     if transforms.shape[0] == 0:
         raise ValueError("need at least one prediction to fuse")
-    T = transforms.to(points.dtype)
-    goals = torch.einsum("kbij,bnj->kbni", T[..., :3, :3], points) + T[:, :, None, :3, 3]  # (K, B, N, 3)
+    goals = se3.apply(transforms.to(points.dtype), points)  # (K, B, N, 3)
     keep = consensus_size(goals.shape[0])
     if keep < goals.shape[0]:
         distance = (goals[:, None] - goals[None]).norm(dim=-1).mean(dim=-1)  # (K, K, B)
+        scenes = torch.arange(points.shape[0], device=points.device)
         medoid = distance.sum(dim=1).argmin(dim=0)  # (B,)
-        to_medoid = distance.gather(0, medoid[None, None].expand(1, *distance.shape[1:]))[0]  # (K, B)
-        nearest = to_medoid.topk(keep, dim=0, largest=False).indices  # (keep, B), the medoid first
-        goals = goals.gather(0, nearest[:, :, None, None].expand(-1, -1, *goals.shape[2:]))
+        nearest = distance[medoid, :, scenes].topk(keep, dim=1, largest=False).indices  # (B, keep)
+        goals = goals[nearest, scenes[:, None]].transpose(0, 1)  # (keep, B, N, 3)
     uniform = torch.ones(points.shape[:2], dtype=points.dtype, device=points.device)
     return weighted_procrustes(points, goals.mean(dim=0), uniform)
