@@ -296,17 +296,23 @@ def test_train_passes_model_options_to_the_model_config(wpbench_exe, tmp_path, t
     assert not (out / "model.pt").exists()
 
 
-def test_train_records_the_augmentation_and_retarget_gate_it_was_given(wpbench_exe, tmp_path, tiny_data):
+def test_train_records_the_augmentation_retarget_gate_and_loss_weights_it_was_given(wpbench_exe, tmp_path, tiny_data):
     out = tmp_path / "gf"
     result = subprocess.run([str(wpbench_exe), "train", "--policy", "gf", "--data", str(tiny_data),
                              "--out", str(out), "--max-steps", "1", "--steps-per-epoch", "1", "--val-per-kind", "2",
                              "--final-val-per-kind", "2", "--num-action-points", "16", "--num-anchor-points", "16",
                              "--model-option", "encoder.emb_dim=16", "--scale", "0.05", "--stretch", "0.3",
-                             "--retarget-within", "90"],
+                             "--retarget-within", "90", "--loss-weight", "goal_flow=2"],
                             capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
-    recorded = json.loads((out / "config.json").read_text())["train_config"]
+    described = json.loads((out / "config.json").read_text())
+    recorded = described["train_config"]
     assert (recorded["augment_scale"], recorded["augment_stretch"], recorded["retarget_within_deg"]) == (0.05, 0.3, 90)
+    assert recorded["loss_weights"] == {"goal_flow": 2.0} and described["loss_weights"]["goal_flow"] == 2.0
+    for bad in ("goal_flow", "goal_flow=lots"):
+        refused = subprocess.run([str(wpbench_exe), "train", "--policy", "gf", "--data", str(tiny_data),
+                                  "--out", str(tmp_path / "other"), "--loss-weight", bad], capture_output=True, text=True)
+        assert refused.returncode == 2 and "TERM=NUMBER" in refused.stderr
     refused = subprocess.run([str(wpbench_exe), "train", "--policy", "gf", "--data", str(tiny_data),
                               "--out", str(tmp_path / "other"), "--stretch", "1.5"], capture_output=True, text=True)
     assert refused.returncode == 2 and "stretch" in refused.stderr

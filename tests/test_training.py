@@ -82,6 +82,21 @@ def test_the_retarget_gate_is_recorded_per_policy_and_must_be_an_angle(data_root
         _config(data_root, "gf", retarget_within_deg=200.0)
 
 
+def test_loss_weights_change_the_preset_the_training_uses_and_are_recorded(data_root):
+    config = _config(data_root, "gf", out=data_root / "gf-weighted", loss_weights={"goal_flow": 2.5})
+    train(config, echo=lambda _: None)
+    for row in _rows(config.out):  # the total is the one term, weighted
+        assert float(row["train_loss"]) == pytest.approx(2.5 * float(row["loss_goal_flow"]), rel=1e-6)
+    described = json.loads((config.out / "config.json").read_text())
+    assert described["loss_weights"]["goal_flow"] == 2.5 and described["loss_preset"] == "gf"
+    with pytest.raises(ValueError, match="unknown loss term"):
+        _config(data_root, "gf", loss_weights={"rot": 1.0})
+    with pytest.raises(ValueError, match="no term with a positive weight"):
+        _config(data_root, "gf", loss_weights={"goal_flow": 0.0})
+    with pytest.raises(ValueError, match=">= 0"):
+        _config(data_root, "wp-postsvd-t", loss_weights={"rotation": -1.0})
+
+
 def test_the_budget_counts_the_time_spent_saving_the_log(data_root, monkeypatch, tmp_path):
     """Wall time, not only the steps: a slow disk or plot makes the run stop sooner and shows
     in train_wall_s (the README's training minutes are what a user waits)."""

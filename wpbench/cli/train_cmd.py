@@ -29,6 +29,10 @@ def train(
         help="KEY=VALUE change of the model config (baselines; WeightedPose takes its branches' configs). "
              "Dotted keys reach nested configs, values are JSON: --model-option anchor_extent=true "
              "--model-option encoder.k=20."),
+    loss_weight: list[str] = typer.Option(
+        None, "--loss-weight",
+        help="TERM=WEIGHT change of the policy's loss preset (wpbench.models.loss_presets), e.g. "
+             "--loss-weight rotation=0.05; 0 drops a term."),
     lr_schedule: str = typer.Option("cosine", help="constant, or cosine (decay to 5% over the time budget)."),
     num_action_points: int = typer.Option(128, min=8, help="Action points per cloud in training (random subset)."),
     num_anchor_points: int = typer.Option(512, min=8, help="Anchor points per cloud in training (random subset)."),
@@ -75,6 +79,7 @@ def train(
 
     try:
         overrides = parse_model_options(model_option or [])
+        loss_weights = parse_loss_weights(loss_weight or [])
         config = TrainConfig(
             policy=policy, data=data, out=out, weights_root=weights_root, minutes=minutes, max_steps=max_steps,
             steps_per_epoch=steps_per_epoch, batch_size=batch_size, learning_rate=learning_rate, mixing_warmup=mixing_warmup,
@@ -82,7 +87,7 @@ def train(
             num_action_points=num_action_points, num_anchor_points=num_anchor_points, augment_yaw=augment, augment_mirror=mirror, augment_scale=scale,
             augment_stretch=stretch, retarget_within_deg=retarget_within,
             val_per_kind=val_per_kind, final_val_per_kind=final_val_per_kind, seed=seed, threads=threads,
-            model_overrides=overrides,
+            model_overrides=overrides, loss_weights=loss_weights,
         )
         metrics = run_training(config, echo=typer.echo, restart=restart)
     except (ValueError, FileNotFoundError) as err:
@@ -114,6 +119,20 @@ def parse_model_options(options: list[str]) -> dict:
             node = node.setdefault(parent, {})
         node[leaf] = value
     return overrides
+
+
+def parse_loss_weights(options: list[str]) -> dict[str, float]:
+    """["rotation=0.05", "translation=2"] -> {"rotation": 0.05, "translation": 2.0}."""
+    weights: dict[str, float] = {}
+    for option in options:
+        name, sep, text = option.partition("=")
+        try:
+            weights[name] = float(text)
+        except ValueError:
+            sep = ""
+        if not sep or not name:
+            raise ValueError(f"--loss-weight {option!r} is not TERM=NUMBER (for example rotation=0.05)")
+    return weights
 
 
 _single = typer.Typer(add_completion=False)

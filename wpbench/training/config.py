@@ -35,6 +35,9 @@ class TrainConfig:
         over the time budget (time-based, since the budget is in minutes, not steps).
     model_overrides: changes to the model's default config (baselines only;
         WeightedPose takes its branch configs from the trained baselines).
+    loss_weights: changes to the weights of the policy's loss preset
+        (``wpbench.models.loss_presets``), e.g. {"rotation": 0.05}; config.json records the
+        weights actually used.
     """
 
     policy: str
@@ -66,6 +69,7 @@ class TrainConfig:
     seed: int = 0
     threads: int = 1
     model_overrides: dict = field(default_factory=dict)
+    loss_weights: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.data = Path(self.data)
@@ -92,8 +96,22 @@ class TrainConfig:
             raise ValueError(f"retarget_within_deg must be in [0, 180] degrees, got {self.retarget_within_deg}")
         if self.mixing_warmup is not None and not 0.0 <= self.mixing_warmup < 1.0:
             raise ValueError(f"mixing_warmup must be in [0, 1), got {self.mixing_warmup}")
+        self.loss_preset()  # unknown terms or negative weights fail here, before any data is read
         if self.max_steps is not None and self.max_steps < 1:
             raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
+
+    def loss_preset(self):
+        """The policy's ``LossPreset`` with ``loss_weights`` applied."""
+        from dataclasses import replace
+
+        from wpbench.models.loss_presets import get_preset
+        from wpbench.training.specs import get_spec
+
+        preset = get_preset(get_spec(self.policy).loss_preset)
+        unknown = sorted(set(self.loss_weights) - set(preset.weights))
+        if unknown:
+            raise ValueError(f"unknown loss term(s) {unknown}; the terms are {sorted(preset.weights)}")
+        return replace(preset, **{name: float(value) for name, value in self.loss_weights.items()})
 
     def to_json(self) -> dict:
         d = asdict(self)

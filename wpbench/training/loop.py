@@ -121,6 +121,7 @@ def _val_row(results: dict[str, dict[str, float]]) -> dict[str, float]:
 def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: bool = False) -> dict:
     """Train ``config.policy``; resumes from ``config.out/checkpoint.pt`` unless ``restart``."""
     spec = get_spec(config.policy)
+    preset = config.loss_preset()
     torch.set_num_threads(config.threads)
     torch.manual_seed(config.seed)
     out = Path(config.out)
@@ -183,7 +184,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
                             config.num_anchor_points, config.augment_yaw, generator,
                             config.augment_mirror, config.augment_scale, config.augment_stretch)
             output = model(batch["action"], batch["anchor"])
-            loss, terms = compute_loss(output, batch, spec.loss_preset, config.retarget_within_deg)
+            loss, terms = compute_loss(output, batch, preset, config.retarget_within_deg)
             optimizer.zero_grad(set_to_none=True)
             if not torch.isfinite(loss):
                 skipped += 1  # a degenerate SVD in one batch must not poison the weights
@@ -248,6 +249,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
         "model": spec.model,
         "model_config": config_to_json(model.config),
         "loss_preset": spec.loss_preset,
+        "loss_weights": preset.weights,
         "kinds": list(spec.kinds),
         "num_action_points": config.num_action_points,
         "num_anchor_points": config.num_anchor_points,
