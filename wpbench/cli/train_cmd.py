@@ -125,13 +125,14 @@ def parse_loss_weights(options: list[str]) -> dict[str, float]:
     """["rotation=0.05", "translation=2"] -> {"rotation": 0.05, "translation": 2.0}."""
     weights: dict[str, float] = {}
     for option in options:
-        name, sep, text = option.partition("=")
+        name, _, text = option.partition("=")
         try:
-            weights[name] = float(text)
+            weight = float(text)  # "rotation" alone leaves text empty, which fails here too
         except ValueError:
-            sep = ""
-        if not sep or not name:
+            weight = None
+        if not name or weight is None:
             raise ValueError(f"--loss-weight {option!r} is not TERM=NUMBER (for example rotation=0.05)")
+        weights[name] = weight
     return weights
 
 
