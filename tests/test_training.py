@@ -93,8 +93,9 @@ def test_loss_weights_change_the_preset_the_training_uses_and_are_recorded(data_
         _config(data_root, "gf", loss_weights={"rot": 1.0})
     with pytest.raises(ValueError, match="no term with a positive weight"):
         _config(data_root, "gf", loss_weights={"goal_flow": 0.0})
-    with pytest.raises(ValueError, match=">= 0"):
-        _config(data_root, "wp-postsvd-t", loss_weights={"rotation": -1.0})
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="finite and >= 0"):
+            _config(data_root, "wp-postsvd-t", loss_weights={"rotation": bad})
 
 
 def test_the_budget_counts_the_time_spent_saving_the_log(data_root, monkeypatch, tmp_path):

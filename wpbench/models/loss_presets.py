@@ -71,8 +71,9 @@ class LossPreset:
     def __post_init__(self) -> None:
         if self.taxpose_pose not in ("output", "taxpose_branch"):
             raise ValueError(f"taxpose_pose must be 'output' or 'taxpose_branch', got {self.taxpose_pose!r}")
-        if any(weight < 0 for weight in self.weights.values()):
-            raise ValueError(f"loss weights must be >= 0, got {self.weights}")
+        # comparisons with NaN are false, so NaN fails too (it would make every step non-finite and skipped)
+        if not all(0 <= weight < float("inf") for weight in self.weights.values()):
+            raise ValueError(f"loss weights must be finite and >= 0, got {self.weights}")
         if not any(self.weights.values()):
             raise ValueError(f"loss preset {self.name!r} has no term with a positive weight")
 
