@@ -9,7 +9,8 @@ The model was trained on random subsets of the stored clouds
 (``config.json``: ``num_action_points`` / ``num_anchor_points``), so each
 observation is subsampled the same way (fixed seed: the same observation gives
 the same answer). ``subsets`` such subsets are answered in one batch and fused
-into one pose (``wpbench.models.subset_ensemble``; 1 = a single pass). The
+into one pose (``wpbench.models.subset_ensemble``; 1 = a single pass), every second
+one in the scene mirrored in y = 0 (``mirror_views``). The
 per-point diagnostics are those of the first subset, mapped back to every observed
 point by nearest kept neighbour (their displacement is copied), so a recorder can
 draw them over the full cloud.
@@ -25,7 +26,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from policies.base import Policy, PolicyConfig, PolicyOutput
-from wpbench.models.configs import DEFAULT_SUBSETS
+from wpbench.models.configs import DEFAULT_MIRROR_VIEWS, DEFAULT_SUBSETS
 
 WEIGHTS_ROOT = Path(__file__).resolve().parent / "weights"
 BEST_FILE = "best.json"
@@ -45,13 +46,15 @@ class LearnedPolicyConfig(PolicyConfig):
     """policy: the trained policy's name (its folder under ``weights_root``).
     weights_root: where trained policies live [default: ``policies/weights``].
     seed: seed of the observation subsampling.
-    subsets: random subsets of the observation answered and fused into one pose (>= 1)."""
+    subsets: random subsets of the observation answered and fused into one pose (>= 1).
+    mirror_views: answer every second subset in the mirrored scene."""
 
     name: ClassVar[str] = "learned"
     policy: str = "wp-postsvd-t"
     weights_root: Path | None = None
     seed: int = 0
     subsets: int = DEFAULT_SUBSETS
+    mirror_views: bool = DEFAULT_MIRROR_VIEWS
 
     def __post_init__(self) -> None:
         if int(self.subsets) < 1:
@@ -78,12 +81,11 @@ class LearnedPolicy(Policy):
         self.config = config
         import torch
 
-        from wpbench.models.subset_ensemble import fuse_goal_clouds, subsets_worth_drawing
+        from wpbench.models import subset_ensemble
         from wpbench.training.artifacts import load_trained_model
 
         self._torch = torch
-        self._fuse = fuse_goal_clouds
-        self._subsets_worth_drawing = subsets_worth_drawing
+        self._ensemble = subset_ensemble
         self.model, self.model_config = load_trained_model(config.weights_dir, config.policy)
         self.num_action_points = int(self.model_config["num_action_points"])
         self.num_anchor_points = int(self.model_config["num_anchor_points"])
@@ -92,7 +94,7 @@ class LearnedPolicy(Policy):
         return {
             "policy": self.config.policy,
             "config": {"policy": self.config.policy, "weights_dir": str(self.config.weights_dir), "seed": self.config.seed,
-                       "subsets": self.config.subsets},
+                       "subsets": self.config.subsets, "mirror_views": self.config.mirror_views},
             "model": self.model_config.get("model"),
             "loss_preset": self.model_config.get("loss_preset"),
             "model_hash": self.model_config.get("model_hash"),
@@ -110,16 +112,18 @@ class LearnedPolicy(Policy):
         action = _cloud(obs, "action_points")
         anchor = _cloud(obs, "anchor_points")
         rng = np.random.default_rng(self.config.seed)
-        count = self._subsets_worth_drawing(self.config.subsets, (len(action), len(anchor)),
-                                            (self.num_action_points, self.num_anchor_points))
+        ensemble = self._ensemble
+        count = ensemble.subsets_worth_drawing(self.config.subsets, (len(action), len(anchor)),
+                                               (self.num_action_points, self.num_anchor_points))
         picks = [(self._subsample(action, self.num_action_points, rng), self._subsample(anchor, self.num_anchor_points, rng))
                  for _ in range(count)]
+        views = ensemble.view_transforms(count, self.config.mirror_views and count > 1)
         with torch.no_grad():
-            out = self.model(torch.from_numpy(np.stack([action[ia] for ia, _ in picks])),
-                             torch.from_numpy(np.stack([anchor[ib] for _, ib in picks])))
-            transform = out.transform.double()
+            out = self.model(ensemble.into_view(torch.from_numpy(np.stack([action[ia] for ia, _ in picks])), views),
+                             ensemble.into_view(torch.from_numpy(np.stack([anchor[ib] for _, ib in picks])), views))
+            transform = ensemble.out_of_view(out.transform.double(), views)
             if count > 1:  # one subset is the model's answer as it is
-                transform = self._fuse(torch.from_numpy(action).double()[None], transform[:, None])
+                transform = ensemble.fuse_goal_clouds(torch.from_numpy(action).double()[None], transform[:, None])
         transform = transform[0].numpy()
         ia, ib = picks[0]
         clouds = {"action": (action, ia), "anchor": (anchor, ib)}

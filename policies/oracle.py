@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from policies.base import Policy, PolicyConfig, PolicyOutput
-from wpbench.models.configs import DEFAULT_SUBSETS
+from wpbench.models.configs import DEFAULT_MIRROR_VIEWS, DEFAULT_SUBSETS
 
 KIND_NAMES = {0: "articulated", 1: "free-floating", "articulated": "articulated", "free-floating": "free-floating"}
 
@@ -23,7 +23,8 @@ class OracleConfig(PolicyConfig):
     articulated_policy: str = "gf"
     free_policy: str = "tp"
     weights_root: Path | None = None
-    subsets: int = DEFAULT_SUBSETS  # passed to both experts (policies.learned)
+    subsets: int = DEFAULT_SUBSETS  # passed to both experts (policies.learned), as is mirror_views
+    mirror_views: bool = DEFAULT_MIRROR_VIEWS
 
 
 class OraclePolicy(Policy):
@@ -33,7 +34,8 @@ class OraclePolicy(Policy):
         from policies.learned import LearnedPolicy
 
         self.config = config or OracleConfig(**kwargs)
-        shared = {"weights_root": self.config.weights_root, "subsets": self.config.subsets}
+        shared = {"weights_root": self.config.weights_root, "subsets": self.config.subsets,
+                  "mirror_views": self.config.mirror_views}
         self.experts = {
             "articulated": LearnedPolicy(policy=self.config.articulated_policy, **shared),
             "free-floating": LearnedPolicy(policy=self.config.free_policy, **shared),

@@ -347,6 +347,18 @@ def test_run_subsets_reaches_the_learned_policy_and_is_refused_for_the_others(ru
     assert result.exit_code == 2 and "stopped by the test" in result.output
     policy = make_policy(captured_runs[0].policy, **captured_runs[0].policy_kwargs)
     assert {expert.config.subsets for expert in policy.experts.values()} == {2}
+    assert {expert.config.mirror_views for expert in policy.experts.values()} == {True}  # the default
     refused = runner.invoke(cli.app, ["run", "--policy", "identity", "--subsets", "2"])
     assert refused.exit_code == 2 and "--subsets applies to the trained policies" in refused.output
+    assert len(captured_runs) == 1
+
+
+def test_run_no_mirror_views_reaches_the_learned_policy_and_is_refused_for_the_others(runner, captured_runs):
+    from policies.registry import make_policy
+
+    result = runner.invoke(cli.app, ["run", "--policy", "gf", "--task", "open-door", "--no-mirror-views"])
+    assert result.exit_code == 2 and "stopped by the test" in result.output
+    assert make_policy(captured_runs[0].policy, **captured_runs[0].policy_kwargs).config.mirror_views is False
+    refused = runner.invoke(cli.app, ["run", "--policy", "identity", "--mirror-views"])
+    assert refused.exit_code == 2 and "mirror-views applies to the trained policies" in refused.output
     assert len(captured_runs) == 1

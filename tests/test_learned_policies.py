@@ -60,32 +60,60 @@ def test_learned_policy_gives_a_rigid_transform_and_full_size_diagnostics(weight
     assert policy.describe()["policy"] == name
 
 
-def test_subset_ensemble_fuses_several_subsets_and_one_subset_is_the_single_pass(weights_root):
+def _subset_answers(policy, obs, count, mirrored):
+    """The model's answer on each of the policy's first ``count`` subsets of ``obs``, the odd ones
+    (when ``mirrored``) given the mirrored clouds and their answers mirrored back."""
     import torch
 
-    single = LearnedPolicy(policy="wp-postsvd", weights_root=weights_root, subsets=1)
-    fused = LearnedPolicy(policy="wp-postsvd", weights_root=weights_root, subsets=4)
+    rng = np.random.default_rng(0)
+    picks = [(policy._subsample(obs["action_points"], policy.num_action_points, rng),
+              policy._subsample(obs["anchor_points"], policy.num_anchor_points, rng)) for _ in range(count)]
+    mirror = np.diag([1.0, -1.0, 1.0, 1.0])
+    answers = []
+    for k, (ia, ib) in enumerate(picks):
+        flip = mirrored and k % 2 == 1
+        seen = [torch.from_numpy(cloud * np.float32([1, -1, 1]) if flip else cloud)[None]
+                for cloud in (obs["action_points"][ia], obs["anchor_points"][ib])]
+        with torch.no_grad():
+            T = policy.model(*seen).transform[0].double().numpy()
+        answers.append(mirror @ T @ mirror if flip else T)
+    return answers
+
+
+def _fused(obs, answers):
+    import torch
+
+    from wpbench.models.subset_ensemble import fuse_goal_clouds
+
+    return fuse_goal_clouds(torch.from_numpy(obs["action_points"]).double()[None],
+                            torch.from_numpy(np.stack(answers))[:, None])[0].numpy()
+
+
+@pytest.mark.parametrize("mirror_views", [False, True])
+def test_subset_ensemble_fuses_several_subsets_and_one_subset_is_the_single_pass(weights_root, mirror_views):
+    single = LearnedPolicy(policy="wp-postsvd", weights_root=weights_root, subsets=1, mirror_views=mirror_views)
+    fused = LearnedPolicy(policy="wp-postsvd", weights_root=weights_root, subsets=4, mirror_views=mirror_views)
     obs = _obs(seed=3)
     one, four = single.predict(obs).transform, fused.predict(obs).transform
     _assert_rigid(four)
-    # subsets=1 is the model on the first subset; the fused answer is the consensus of the four.
-    rng = np.random.default_rng(0)
-    picks = [(single._subsample(obs["action_points"], single.num_action_points, rng),
-              single._subsample(obs["anchor_points"], single.num_anchor_points, rng)) for _ in range(4)]
-    with torch.no_grad():
-        answers = [single.model(torch.from_numpy(obs["action_points"][ia])[None],
-                                torch.from_numpy(obs["anchor_points"][ib])[None]).transform[0].double().numpy()
-                   for ia, ib in picks]
-    np.testing.assert_allclose(one, answers[0], atol=1e-5)
-    from wpbench.models.subset_ensemble import fuse_goal_clouds
-
-    expected = fuse_goal_clouds(torch.from_numpy(obs["action_points"]).double()[None],
-                                torch.from_numpy(np.stack(answers))[:, None])[0].numpy()
-    np.testing.assert_allclose(four, expected, atol=1e-5)
+    # subsets=1 is the model on the first subset as observed (never mirrored); the fused answer is
+    # the consensus of the four, every second one answered in the mirrored scene when asked.
+    np.testing.assert_allclose(one, _subset_answers(single, obs, 1, mirrored=False)[0], atol=1e-5)
+    np.testing.assert_allclose(four, _fused(obs, _subset_answers(fused, obs, 4, mirror_views)), atol=1e-5)
     assert not np.allclose(four, one, atol=1e-6)  # the other subsets changed the answer
     assert fused.describe()["config"]["subsets"] == 4
+    assert fused.describe()["config"]["mirror_views"] is mirror_views
     with pytest.raises(ValueError, match="subsets"):
         LearnedPolicy(policy="wp-postsvd", weights_root=weights_root, subsets=0)
+
+
+def test_mirrored_views_change_the_answer_of_a_model_that_is_not_mirror_equivariant(weights_root):
+    obs = _obs(seed=5)
+    plain = LearnedPolicy(policy="wp-postsvd", weights_root=weights_root, subsets=4, mirror_views=False)
+    mirrored = LearnedPolicy(policy="wp-postsvd", weights_root=weights_root, subsets=4, mirror_views=True)
+    assert not np.allclose(plain.predict(obs).transform, mirrored.predict(obs).transform, atol=1e-6)
+    # The diagnostics are the first subset's, which is never mirrored.
+    np.testing.assert_allclose(plain.predict(obs).diagnostics["flow"], mirrored.predict(obs).diagnostics["flow"])
 
 
 def test_registry_builds_the_learned_policies_and_wp_follows_best_json(weights_root):

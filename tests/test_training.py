@@ -189,6 +189,15 @@ def test_evaluation_with_subsets_fuses_them_and_skips_them_when_the_clouds_are_n
     one = per_sample_errors(model, dataset, idx, 24, 40)
     three = per_sample_errors(model, dataset, idx, 24, 40, subsets=3)
     assert torch.isfinite(three["rot_deg"]).all() and not torch.allclose(one["point_m"], three["point_m"])
+    # The second subset is answered in the mirrored scene unless asked not to; the first never is.
+    # (This tiny untrained Goal Flow answers a scene and its mirror image alike; TAX-Pose does not.)
+    taxpose = build_model("taxpose", encoder={"k": 4, "edge_channels": [8, 8], "emb_dim": 16, "groups": 4},
+                          head_hidden=16, attention_heads=2)
+    mirrored = per_sample_errors(taxpose, dataset, idx, 24, 40, subsets=3)
+    plain = per_sample_errors(taxpose, dataset, idx, 24, 40, subsets=3, mirror_views=False)
+    assert torch.isfinite(plain["rot_deg"]).all() and not torch.allclose(plain["point_m"], mirrored["point_m"])
+    torch.testing.assert_close(per_sample_errors(taxpose, dataset, idx, 24, 40, mirror_views=False),
+                               per_sample_errors(taxpose, dataset, idx, 24, 40))
     # Whole clouds in: every subset is the same cloud, so more subsets change nothing.
     whole = per_sample_errors(model, dataset, idx, 32, 48)
     torch.testing.assert_close(per_sample_errors(model, dataset, idx, 32, 48, subsets=3), whole)

@@ -15,6 +15,8 @@ def paper_table(
     run_missing: bool = typer.Option(True, help="Run the simulations that results/runs lacks."),
     subsets: int = typer.Option(None, min=1, help="Random point subsets per sample, fused into one pose "
                                                   "[default: as the learned policies answer]."),
+    mirror_views: bool = typer.Option(None, help="Answer every second subset in the mirrored scene "
+                                                 "[default: as the learned policies answer]."),
     out: Path = typer.Option(Path("results/paper-table.md"), help="Markdown file to write."),
 ) -> None:
     """Pose errors (train/val x free-floating/articulated) and simulated success of every learned policy."""
@@ -24,8 +26,9 @@ def paper_table(
     check_choice("observation mode", obs, ("camera", "mesh"))
     if not (data / "train").is_dir() or not (data / "val").is_dir():
         raise typer.BadParameter(f"{data} lacks train/ and val/; make them with `wpbench data generate --out {data}`")
+    ensemble = {key: value for key, value in (("subsets", subsets), ("mirror_views", mirror_views)) if value is not None}
     cfg = PaperTableConfig(data=data, samples_per_kind=samples, episodes=episodes, obs=obs, run_missing=run_missing,
-                           results=out.parent, **({} if subsets is None else {"subsets": subsets}))
+                           results=out.parent, **ensemble)
     path = make_paper_table(cfg, out)
     typer.echo(path.read_text())
     typer.echo(f"written: {path}")

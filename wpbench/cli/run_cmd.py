@@ -47,6 +47,9 @@ def run(
     subsets: int = typer.Option(
         None, min=1, help="Trained policies: random subsets of each observation answered and fused into one pose "
                           "[default: the policy's, wpbench.models.configs.DEFAULT_SUBSETS]."),
+    mirror_views: bool = typer.Option(
+        None, help="Trained policies: answer every second subset in the mirrored scene "
+                   "[default: the policy's, wpbench.models.configs.DEFAULT_MIRROR_VIEWS]."),
 ) -> None:
     """Run POLICY on TASK for N episodes: progress bar, summary table, episodes.jsonl and summary.json."""
     if policy == "list":
@@ -60,12 +63,14 @@ def run(
         raise typer.BadParameter(f"--assets must be 'procedural' or an existing folder; {assets!r} is neither")
     policy_kwargs = {}
     learned = _learned_policies()
-    for flag, value in (("--weights-root", weights_root), ("--subsets", subsets)):
+    for flag, value in (("--weights-root", weights_root), ("--subsets", subsets), ("--[no-]mirror-views", mirror_views)):
         if value is not None and policy not in learned:
             raise typer.BadParameter(f"{flag} applies to the trained policies ({', '.join(learned)}); "
                                      f"{policy!r} loads no weights")
     if subsets is not None:
         policy_kwargs["subsets"] = subsets
+    if mirror_views is not None:
+        policy_kwargs["mirror_views"] = mirror_views
     if weights_root is not None:
         if not weights_root.is_dir():
             raise typer.BadParameter(f"--weights-root {weights_root} is not a folder; train into it with "

@@ -22,7 +22,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from wpbench.models.configs import DEFAULT_SUBSETS
+from wpbench.models.configs import DEFAULT_MIRROR_VIEWS, DEFAULT_SUBSETS
 
 POLICIES = ("gf", "tp", "oracle", "wp-og", "wp-postsvd", "wp-postsvd-t")
 TASKS = ("open-door", "place-in", "open-then-place")
@@ -41,6 +41,7 @@ class PaperTableConfig:
     results: Path = Path("results")
     policies: tuple[str, ...] = POLICIES
     subsets: int = DEFAULT_SUBSETS  # random subsets per sample, fused, as the learned policies answer
+    mirror_views: bool = DEFAULT_MIRROR_VIEWS  # every second subset answered in the mirrored scene, as they do
 
 
 def _models_for(policy: str) -> dict[str, tuple]:
@@ -74,7 +75,7 @@ def pose_errors(cfg: PaperTableConfig, policy: str) -> dict[tuple[str, str], dic
             model, num_action, num_anchor = models[kind]
             dataset = CrossPoseDataset(directory, kinds=(kind,))
             out[(split, kind)] = evaluate(model, dataset, (kind,), cfg.samples_per_kind, num_action, num_anchor,
-                                          subsets=cfg.subsets)[kind]
+                                          subsets=cfg.subsets, mirror_views=cfg.mirror_views)[kind]
     return out
 
 
@@ -88,7 +89,8 @@ def category_errors(cfg: PaperTableConfig, policy: str) -> dict[str, dict[str, d
     for kind in KINDS:
         model, num_action, num_anchor = models[kind]
         dataset = CrossPoseDataset(Path(cfg.data) / "val", kinds=(kind,))
-        out[kind] = evaluate_by_category(model, dataset, kind, num_action, num_anchor, subsets=cfg.subsets)
+        out[kind] = evaluate_by_category(model, dataset, kind, num_action, num_anchor, subsets=cfg.subsets,
+                                         mirror_views=cfg.mirror_views)
     return out
 
 
@@ -149,7 +151,9 @@ def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: di
     lines = ["# WeightedPose, paper Table 1 layout (wpbench)", "",
              "Made by `wpbench paper-table`. Pose errors are on the generated data set "
              f"(`{cfg.data}`, up to {cfg.samples_per_kind} samples per split and kind, camera point clouds, "
-             f"each answered from {cfg.subsets} random point subsets fused into one pose as in the benchmark); "
+             f"each answered from {cfg.subsets} random point subsets"
+             f"{', every second one mirrored,' if cfg.mirror_views and cfg.subsets > 1 else ''} "
+             "fused into one pose as in the benchmark); "
              "success rates are simulated episodes on the val split (unseen built-in furniture), "
              f"obs `{cfg.obs}`, with 95% Wilson intervals.", "",
              "## Pose errors (rotation deg / translation cm / per-point cm)", ""]

@@ -24,6 +24,8 @@ HeadingSource = Literal["centroids", "action_panel"]
 HEADING_SOURCES: tuple[str, ...] = ("centroids", "action_panel")
 # Random point subsets a learned policy answers and fuses into one pose (``wpbench.models.subset_ensemble``).
 DEFAULT_SUBSETS = 8
+# Answer every second subset in the mirrored scene (``wpbench.models.subset_ensemble.view_transforms``).
+DEFAULT_MIRROR_VIEWS = True
 
 
 @dataclass(frozen=True)

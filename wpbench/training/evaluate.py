@@ -6,8 +6,9 @@ all against the equivalent goal nearest to the prediction in rotation (for a sym
 object every equivalent goal is correct; ``wpbench.data.equivalent_goals``).
 
 ``subsets`` > 1 answers each sample from that many random subsets of its stored clouds,
-fused like the learned policies do (``wpbench.models.subset_ensemble``); the errors are
-then measured on every stored action point. Training validates with one subset.
+fused like the learned policies do (``wpbench.models.subset_ensemble``; with ``mirror_views``
+every second one in the mirrored scene); the errors are then measured on every stored action
+point. Training validates with one subset.
 """
 
 from __future__ import annotations
@@ -20,7 +21,8 @@ from wpbench.data.config import KIND_CODE, KINDS
 from wpbench.data.dataset import CrossPoseDataset
 from wpbench.data.equivalent_goals import nearest_goal
 from wpbench.geometry import metrics
-from wpbench.models.subset_ensemble import fuse_goal_clouds, subsets_worth_drawing
+from wpbench.models import subset_ensemble as ensemble
+from wpbench.models.configs import DEFAULT_MIRROR_VIEWS
 from wpbench.training.batches import make_batch, subsample_points
 
 
@@ -34,6 +36,7 @@ def per_sample_errors(
     batch_size: int = 16,
     seed: int = 0,
     subsets: int = 1,
+    mirror_views: bool = DEFAULT_MIRROR_VIEWS,
 ) -> dict[str, torch.Tensor]:
     """Errors of each sample ``indices`` of ``dataset``: {"rot_deg", "trans_m", "point_m"[, "w"]}, each (len(indices),).
 
@@ -53,14 +56,17 @@ def per_sample_errors(
             anchor = subsample_points(batch["anchor"], num_anchor, generator)
             output = model(action, anchor)
             T_pred = output.transform.double()
-            count = subsets_worth_drawing(subsets, (batch["action"].shape[1], batch["anchor"].shape[1]),
-                                          (num_action, num_anchor))
+            count = ensemble.subsets_worth_drawing(subsets, (batch["action"].shape[1], batch["anchor"].shape[1]),
+                                                   (num_action, num_anchor))
             if count > 1:
-                more = [model(subsample_points(batch["action"], num_action, generator),
-                              subsample_points(batch["anchor"], num_anchor, generator)).transform.double()
-                        for _ in range(count - 1)]
+                views = ensemble.view_transforms(count, mirror_views)
+                more = []
+                for view in views[1:, None]:  # the first subset was answered as observed
+                    seen = [ensemble.into_view(subsample_points(batch[key], n, generator)[None], view)[0]
+                            for key, n in (("action", num_action), ("anchor", num_anchor))]
+                    more.append(ensemble.out_of_view(model(*seen).transform.double()[None], view)[0])
                 action = batch["action"]
-                T_pred = fuse_goal_clouds(action.double(), torch.stack([T_pred, *more]))
+                T_pred = ensemble.fuse_goal_clouds(action.double(), torch.stack([T_pred, *more]))
             if "w" in output.diagnostics:
                 columns["w"].append(output.diagnostics["w"].reshape(len(T_pred), -1).mean(dim=1).double())
             T_gt = nearest_goal(T_pred, batch["gt_equivalents"].double())
@@ -85,6 +91,7 @@ def evaluate(
     batch_size: int = 16,
     seed: int = 0,
     subsets: int = 1,
+    mirror_views: bool = DEFAULT_MIRROR_VIEWS,
 ) -> dict[str, dict[str, float]]:
     """{kind: {"rot_deg", "trans_m", "point_m", "failures", "n"[, "w"]}} on ``per_kind`` samples of each kind
     spread evenly over the split (fixed subsampling seed, so epochs are comparable).
@@ -96,7 +103,8 @@ def evaluate(
         idx = torch.nonzero(dataset.kind == KIND_CODE[kind]).flatten()
         if len(idx) > per_kind:  # spread over the whole split (consecutive samples share furniture)
             idx = idx[torch.linspace(0, len(idx) - 1, per_kind).round().long()]
-        errors = per_sample_errors(model, dataset, idx, num_action, num_anchor, batch_size, seed, subsets)
+        errors = per_sample_errors(model, dataset, idx, num_action, num_anchor, batch_size, seed, subsets,
+                                   mirror_views)
         results[kind] = _summarise(errors)
     return results
 
@@ -109,10 +117,12 @@ def evaluate_by_category(
     num_anchor: int,
     seed: int = 0,
     subsets: int = 1,
+    mirror_views: bool = DEFAULT_MIRROR_VIEWS,
 ) -> dict[str, dict[str, float]]:
     """{category: the ``evaluate`` statistics} over every sample of ``kind`` in ``dataset``."""
     idx = torch.nonzero(dataset.kind == KIND_CODE[kind]).flatten()
-    errors = per_sample_errors(model, dataset, idx, num_action, num_anchor, seed=seed, subsets=subsets)
+    errors = per_sample_errors(model, dataset, idx, num_action, num_anchor, seed=seed, subsets=subsets,
+                               mirror_views=mirror_views)
     categories = [dataset.categories[i] for i in idx.tolist()]
     out = {}
     for category in sorted(set(categories)):
