@@ -39,7 +39,7 @@ y = 0 (``view_transforms``): its clouds go in as ``M p`` and its answer ``T'`` c
 ``M T' M`` (``M = M^-1``; the reflections cancel, so the result is a rigid motion), then all K
 are fused as above. Yaw views are not worth it: the heading frame makes the models
 yaw-equivariant (8 yaw views gave the same errors as 8 plain subsets, within 0.01).
-Measured with the shipped wp-postsvd-t on data3 val (200 samples per kind, 8 subsets, consensus;
+Measured with the previous wp-postsvd-t (C in results/experiments) on data3 val (200 samples per kind, 8 subsets, consensus;
 rotation deg / translation cm), plain subsets / every second one mirrored: free-floating
 4.72 / 1.97 and 4.53 / 1.88; articulated 2.50 / 2.47 and 2.23 / 2.41 (safes 4.3 -> 3.1 cm and
 fridges 3.0 -> 2.5 cm gain, drawers 4.5 -> 5.0 cm lose).
