@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import pytest
 import torch
 
@@ -51,9 +53,7 @@ def test_warmup_boundary_and_learning_rates():
 
 
 def _states(data_root, policy, warmup):  # noqa: F811
-    for baseline in ("gf", "tp"):
-        if not (data_root / "weights" / baseline / "model.pt").is_file():
-            train(_config(data_root, baseline), echo=lambda _: None)
+    _train_baselines_once(data_root)
     config = _config(data_root, policy, mixing_warmup=warmup, out=data_root / f"{policy}-{warmup}")
     train(config, echo=lambda _: None)
     gf = torch.load(data_root / "weights" / "gf" / "model.pt", weights_only=True)
@@ -79,3 +79,61 @@ def test_without_warmup_the_branches_train_too(data_root):  # noqa: F811
     assert _changed(tp, after, "taxpose.")
     assert any(not key.startswith("mixing_head.") for key in _changed(gf, after, "goalflow."))
     assert {row["mixing_only"] for row in _rows(config.out)} == {"0"}
+
+
+def _step_budget_run(data_root, out, echo=lambda _: None, **kw):  # noqa: F811
+    _train_baselines_once(data_root)
+    config = _config(data_root, "wp-postsvd", out=out, max_steps=None, steps=4, minutes=30.0,
+                     mixing_warmup=0.5, **kw)
+    metrics = train(config, echo=echo)
+    return config, metrics
+
+
+def _train_baselines_once(data_root):  # noqa: F811
+    for baseline in ("gf", "tp"):
+        if not (data_root / "weights" / baseline / "model.pt").is_file():
+            train(_config(data_root, baseline), echo=lambda _: None)
+
+
+def test_a_step_budget_runs_warmup_and_schedule_over_steps(data_root, tmp_path):  # noqa: F811
+    config, metrics = _step_budget_run(data_root, tmp_path / "steps")
+    rows = _rows(config.out)
+    spec = get_spec("wp-postsvd")
+    base = spec.learning_rate
+    assert metrics["steps"] == 4 and [int(r["step"]) for r in rows] == [1, 2, 3, 4]
+    assert [r["mixing_only"] for r in rows] == ["1", "1", "0", "0"]  # half of 4 steps, not half of 30 min
+    # One step per epoch logs that step's rate: the cosine over the 2 joint steps starts at the base.
+    lrs = [float(r["lr"]) for r in rows]
+    assert lrs[:2] == [pytest.approx(spec.mixing_learning_rate)] * 2
+    assert lrs[2:] == [pytest.approx(base), pytest.approx(base * (0.05 + 0.95 * 0.5))]
+
+
+def test_a_step_budget_gives_the_same_weights_on_a_slow_machine(data_root, tmp_path, monkeypatch):  # noqa: F811
+    """What the budget is for: the same weights whether the run had the machine alone or not."""
+    from wpbench.training import log as train_log
+
+    fast, _ = _step_budget_run(data_root, tmp_path / "fast")
+    write_log = train_log.write_log
+
+    def slow_write_log(out, rows):
+        write_log(out, rows)
+        time.sleep(0.3)
+
+    monkeypatch.setattr(train_log, "write_log", slow_write_log)
+    slow, metrics = _step_budget_run(data_root, tmp_path / "slow")
+    assert metrics["train_wall_s"] >= 1.2
+    a = torch.load(fast.out / "model.pt", weights_only=True)
+    b = torch.load(slow.out / "model.pt", weights_only=True)
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_a_step_budget_cut_by_the_minutes_cap_says_so(data_root, tmp_path):  # noqa: F811
+    messages = []
+    _train_baselines_once(data_root)
+    config = _config(data_root, "wp-postsvd", out=tmp_path / "cut", max_steps=None, steps=10_000,
+                     minutes=1.0 / 60)
+    metrics = train(config, echo=messages.append)
+    assert metrics["steps"] < 10_000
+    assert any("cap stopped the run" in m and "10000-step budget" in m for m in messages)
+    with pytest.raises(ValueError, match="steps must be >= 1"):
+        _config(data_root, "wp-postsvd", steps=0)

@@ -19,6 +19,9 @@ def train(
     weights_root: Path = typer.Option(None, help="Where trained policies live, warm starts and best.json [default: policies/weights]."),
     batch_size: int = typer.Option(8, min=1, help="Samples per optimiser step."),
     steps_per_epoch: int = typer.Option(40, min=1, help="Optimiser steps between validation + checkpoint."),
+    steps: int = typer.Option(None, min=1, help="Budget in optimiser steps: schedule and warm-up run over steps, "
+                                                "so the result does not depend on the machine's load "
+                                                "(--minutes stays a wall-time cap)."),
     max_steps: int = typer.Option(None, min=1, help="Stop after this many optimiser steps (whatever the budget)."),
     learning_rate: float = typer.Option(None, help="Adam learning rate [default: 1e-3 baselines, 1e-4 WeightedPose]."),
     mixing_warmup: float = typer.Option(None, min=0.0, max=0.99,
@@ -33,7 +36,7 @@ def train(
         None, "--loss-weight",
         help="TERM=WEIGHT change of the policy's loss preset (wpbench.models.loss_presets), e.g. "
              "--loss-weight rotation=0.05; 0 drops a term."),
-    lr_schedule: str = typer.Option("cosine", help="constant, or cosine (decay to 5% over the time budget)."),
+    lr_schedule: str = typer.Option("cosine", help="constant, or cosine (decay to 5% over the budget)."),
     num_action_points: int = typer.Option(128, min=8, help="Action points per cloud in training (random subset)."),
     num_anchor_points: int = typer.Option(512, min=8, help="Anchor points per cloud in training (random subset)."),
     val_per_kind: int = typer.Option(32, min=1, help="Validation samples per kind after each epoch."),
@@ -81,7 +84,7 @@ def train(
         overrides = parse_model_options(model_option or [])
         loss_weights = parse_loss_weights(loss_weight or [])
         config = TrainConfig(
-            policy=policy, data=data, out=out, weights_root=weights_root, minutes=minutes, max_steps=max_steps,
+            policy=policy, data=data, out=out, weights_root=weights_root, minutes=minutes, steps=steps, max_steps=max_steps,
             steps_per_epoch=steps_per_epoch, batch_size=batch_size, learning_rate=learning_rate, mixing_warmup=mixing_warmup,
             lr_schedule=lr_schedule,
             num_action_points=num_action_points, num_anchor_points=num_anchor_points, augment_yaw=augment, augment_mirror=mirror, augment_scale=scale,

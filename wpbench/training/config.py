@@ -19,7 +19,11 @@ class TrainConfig:
 
     minutes: wall-time budget of the training epochs (steps, validations, checkpoints and
         logs), summed over resumed runs; the final validation runs after it.
-    max_steps: optional cap on optimiser steps (tests use 2).
+    steps: optional budget in optimiser steps. With it, the learning-rate schedule and the
+        mixing warm-up run over steps instead of seconds and the run ends after ``steps``,
+        so its result does not depend on what else shares the machine (``minutes`` stays
+        a wall-time cap). Used to give every WeightedPose variant the same compute.
+    max_steps: optional cap on optimiser steps that leaves the schedule alone (tests use 2).
     steps_per_epoch: optimiser steps between validations / checkpoints (an "epoch"
         here is this many steps, so a run that cannot see all data still logs
         and checkpoints regularly).
@@ -32,7 +36,7 @@ class TrainConfig:
     mixing_warmup: WeightedPose only: fraction of the budget that trains the mixing
         head alone (``wpbench.training.warmup``); None = the policy's default.
     lr_schedule: "constant", or "cosine": decays from the learning rate to 5% of it
-        over the time budget (time-based, since the budget is in minutes, not steps).
+        over the budget (over ``steps`` when given, else over ``minutes``).
     model_overrides: changes to the model's default config (baselines only;
         WeightedPose takes its branch configs from the trained baselines).
     loss_weights: changes to the weights of the policy's loss preset
@@ -45,6 +49,7 @@ class TrainConfig:
     out: Path | None = None
     weights_root: Path | None = None
     minutes: float = 20.0
+    steps: int | None = None
     max_steps: int | None = None
     steps_per_epoch: int = 40
     batch_size: int = 8
@@ -97,8 +102,9 @@ class TrainConfig:
         if self.mixing_warmup is not None and not 0.0 <= self.mixing_warmup < 1.0:
             raise ValueError(f"mixing_warmup must be in [0, 1), got {self.mixing_warmup}")
         self.loss_preset()  # unknown terms or negative weights fail here, before any data is read
-        if self.max_steps is not None and self.max_steps < 1:
-            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
+        for name in ("steps", "max_steps"):
+            if getattr(self, name) is not None and getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
 
     def loss_preset(self):
         """The policy's ``LossPreset`` with ``loss_weights`` applied."""

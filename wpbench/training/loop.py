@@ -149,8 +149,9 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
         echo(f"resuming {config.policy} from epoch {epoch}, step {step}, {elapsed / 60:.1f} min trained")
     budget = config.minutes * 60.0
     batches = shuffled_batches(len(train_set), config.batch_size, generator)
+    budget_text = f"{config.steps} steps (at most {config.minutes} min)" if config.steps else f"{config.minutes} min"
     echo(f"{config.policy}: {len(train_set)} train / {len(val_set)} val samples ({', '.join(spec.kinds)}), "
-         f"{sum(p.numel() for p in model.parameters())} parameters, lr {lr}, budget {config.minutes} min"
+         f"{sum(p.numel() for p in model.parameters())} parameters, lr {lr}, budget {budget_text}"
          + (f", the first {warmup:.0%} training the mixing head alone" if warmup > 0 else ""))
 
     # The budget is wall time: validation, checkpoints and the log count too, so that "trained for N
@@ -161,8 +162,22 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
     def trained() -> float:
         return trained_before + time.perf_counter() - clock_started
 
+    # With a step budget the schedule and the warm-up follow steps, not seconds: a run then gives
+    # the same weights whether it had the machine alone or shared it.
+    step_caps = [cap for cap in (config.steps, config.max_steps) if cap is not None]
+    step_cap = min(step_caps) if step_caps else None
+
+    def position() -> tuple[float, float]:
+        """How far the run is through its budget, as (done, total) in steps or seconds."""
+        if config.steps is not None:
+            return float(step), float(config.steps)
+        return trained(), budget
+
+    def out_of_steps() -> bool:
+        return step_cap is not None and step >= step_cap
+
     def finished() -> bool:
-        return (config.max_steps is not None and step >= config.max_steps) or trained() >= budget
+        return out_of_steps() or trained() >= budget
 
     last_epoch_seconds = 0.0
     model.train()
@@ -172,14 +187,14 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
             break
         epoch_started = trained()
         # The phase is chosen per epoch from the elapsed time, so a resumed run picks it up.
-        mixing_only = in_warmup(epoch_started, budget, warmup)
+        mixing_only = in_warmup(*position(), warmup)
         if warmup > 0:
             set_phase(model, mixing_only)
         sums: dict[str, float] = {}
         steps_done = skipped = 0
-        while steps_done < config.steps_per_epoch and not (config.max_steps is not None and step >= config.max_steps):
+        while steps_done < config.steps_per_epoch and not out_of_steps():
             for group in optimizer.param_groups:
-                group["lr"] = phase_lr(spec, lr, config.lr_schedule, trained(), budget, warmup)
+                group["lr"] = phase_lr(spec, lr, config.lr_schedule, *position(), warmup)
             batch = prepare(make_batch(train_set, next(batches)), config.num_action_points,
                             config.num_anchor_points, config.augment_yaw, generator,
                             config.augment_mirror, config.augment_scale, config.augment_stretch)
@@ -224,6 +239,9 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
              + " ".join(f"{k} {v['rot_deg']:.1f}deg/{v['trans_m'] * 100:.1f}cm" for k, v in results.items()))
 
     elapsed = trained()
+    if config.steps is not None and step < config.steps:
+        echo(f"warning: the {config.minutes} min cap stopped the run at step {step} of its {config.steps}-step "
+             f"budget, so its schedule did not finish; raise --minutes and run again to resume")
     if rows:
         train_log.plot_log(out, rows, f"{config.policy} ({spec.loss_preset} loss)")
     final_started = time.perf_counter()
