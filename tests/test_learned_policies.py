@@ -179,7 +179,9 @@ def test_shipped_weights_say_how_they_were_made():
     for name in ("gf", "tp", "wp-og", "wp-postsvd", "wp-postsvd-t"):
         config = json.loads((WEIGHTS_ROOT / name / "config.json").read_text())
         metrics = json.loads((WEIGHTS_ROOT / name / "metrics.json").read_text())
-        assert config["policy"] == name and config["train_config"]["minutes"] <= 60
+        assert config["policy"] == name
+        # The wall time the training really took (a step budget's --minutes is only a cap).
+        assert 0 < metrics["train_wall_s"] <= 60 * 60, (name, metrics["train_wall_s"])
         assert metrics["val"] and metrics["peak_rss_mib"] < 8 * 1024
 
 
