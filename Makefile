@@ -15,8 +15,9 @@ RUN_ARGS    ?=
 # `make run` writes to its own folder (git-ignored), so it really runs its episodes even
 # though the published runs under results/runs/ are committed; rerunning it resumes. The
 # folder is named after the shipped weights too: after new weights arrive (git pull), the
-# next `make run` starts a new run instead of refusing to resume the old one, which stays.
-WEIGHTS_ID  := $(shell cat policies/weights/best.json policies/weights/*/model.pt 2>/dev/null | sha256sum | cut -c1-8)
+# next `make run` starts a new run instead of refusing to resume the old one, which stays
+# (`=`, not `:=`: the weights are hashed only by the targets that use RUN_OUT).
+WEIGHTS_ID   = $(shell cat policies/weights/best.json policies/weights/*/model.pt 2>/dev/null | sha256sum | cut -c1-8)
 RUN_OUT     ?= runs/$(POLICY)__$(TASK)__$(SPLIT)__weights-$(WEIGHTS_ID)
 RESULTS     ?= results
 PYTEST_ARGS ?=

@@ -82,9 +82,10 @@ def test_without_warmup_the_branches_train_too(data_root):  # noqa: F811
 
 
 def _step_budget_run(data_root, out, echo=lambda _: None, **kw):  # noqa: F811
+    """A wp-postsvd run of 4 steps (half of them warm-up) under a 30-minute cap; ``kw`` changes it."""
     _train_baselines_once(data_root)
-    config = _config(data_root, "wp-postsvd", out=out, max_steps=None, steps=4, minutes=30.0,
-                     mixing_warmup=0.5, **kw)
+    settings = {"max_steps": None, "steps": 4, "minutes": 30.0, "mixing_warmup": 0.5, **kw}
+    config = _config(data_root, "wp-postsvd", out=out, **settings)
     metrics = train(config, echo=echo)
     return config, metrics
 
@@ -129,10 +130,7 @@ def test_a_step_budget_gives_the_same_weights_on_a_slow_machine(data_root, tmp_p
 
 def test_a_step_budget_cut_by_the_minutes_cap_says_so(data_root, tmp_path):  # noqa: F811
     messages = []
-    _train_baselines_once(data_root)
-    config = _config(data_root, "wp-postsvd", out=tmp_path / "cut", max_steps=None, steps=10_000,
-                     minutes=1.0 / 60)
-    metrics = train(config, echo=messages.append)
+    _, metrics = _step_budget_run(data_root, tmp_path / "cut", echo=messages.append, steps=10_000, minutes=1.0 / 60)
     assert metrics["steps"] < 10_000
     assert any("cap stopped the run" in m and "10000-step budget" in m for m in messages)
     with pytest.raises(ValueError, match="steps must be >= 1"):

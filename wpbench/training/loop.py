@@ -186,7 +186,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
         if rows and trained() + 0.5 * last_epoch_seconds > budget:
             break
         epoch_started = trained()
-        # The phase is chosen per epoch from the elapsed time, so a resumed run picks it up.
+        # The phase is chosen per epoch from the budget position (time or steps), so a resumed run picks it up.
         mixing_only = in_warmup(*position(), warmup)
         if warmup > 0:
             set_phase(model, mixing_only)
