@@ -1,5 +1,5 @@
 """wpbench policies: one file per policy, found by name in ``policies.registry``."""
 
-from policies.registry import available_policies, make_policy
+from wpbench.policies.registry import available_policies, make_policy
 
 __all__ = ["available_policies", "make_policy"]

@@ -7,7 +7,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from policies.base import Policy, PolicyConfig, PolicyOutput
+from wpbench.policies.base import Policy, PolicyConfig, PolicyOutput
 
 
 @dataclass

@@ -25,7 +25,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from policies.base import Policy, PolicyConfig, PolicyOutput
+from wpbench.policies.base import Policy, PolicyConfig, PolicyOutput
 from wpbench.models.configs import DEFAULT_MIRROR_VIEWS, DEFAULT_SUBSETS
 
 WEIGHTS_ROOT = Path(__file__).resolve().parent / "weights"

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
-from policies.base import Policy, PolicyConfig, PolicyOutput
+from wpbench.policies.base import Policy, PolicyConfig, PolicyOutput
 from wpbench.models.configs import DEFAULT_MIRROR_VIEWS, DEFAULT_SUBSETS
 
 KIND_NAMES = {0: "articulated", 1: "free-floating", "articulated": "articulated", "free-floating": "free-floating"}
@@ -31,7 +31,7 @@ class OraclePolicy(Policy):
     uses_ground_truth = True
 
     def __init__(self, config: OracleConfig | None = None, **kwargs: Any) -> None:
-        from policies.learned import LearnedPolicy
+        from wpbench.policies.learned import LearnedPolicy
 
         self.config = config or OracleConfig(**kwargs)
         shared = {"weights_root": self.config.weights_root, "subsets": self.config.subsets,

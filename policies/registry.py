@@ -9,19 +9,19 @@ from __future__ import annotations
 
 import importlib
 
-from policies.base import Policy
+from wpbench.policies.base import Policy
 
 # name -> "module:Class" (the class takes keyword arguments of its config)
 POLICIES: dict[str, str] = {
-    "gt": "policies.gt:GroundTruthPolicy",
-    "identity": "policies.identity:IdentityPolicy",
-    "gf": "policies.learned:GoalFlowPolicy",
-    "tp": "policies.learned:TaxPosePolicy",
-    "wp-og": "policies.learned:WeightedPoseOGPolicy",
-    "wp-postsvd": "policies.learned:WeightedPosePostSVDPolicy",
-    "wp-postsvd-t": "policies.learned:WeightedPosePostSVDTPolicy",
-    "wp": "policies.learned:BestWeightedPosePolicy",
-    "oracle": "policies.oracle:OraclePolicy",
+    "gt": "wpbench.policies.gt:GroundTruthPolicy",
+    "identity": "wpbench.policies.identity:IdentityPolicy",
+    "gf": "wpbench.policies.learned:GoalFlowPolicy",
+    "tp": "wpbench.policies.learned:TaxPosePolicy",
+    "wp-og": "wpbench.policies.learned:WeightedPoseOGPolicy",
+    "wp-postsvd": "wpbench.policies.learned:WeightedPosePostSVDPolicy",
+    "wp-postsvd-t": "wpbench.policies.learned:WeightedPosePostSVDTPolicy",
+    "wp": "wpbench.policies.learned:BestWeightedPosePolicy",
+    "oracle": "wpbench.policies.oracle:OraclePolicy",
 }
 
 

@@ -6,9 +6,9 @@ To add a task: write one file here with a ``CrossPoseEnv`` subclass decorated by
 import it below, and add its CLI name to ``TASKS``.
 """
 
-from tasks.open_door import OpenDoorEnv
-from tasks.open_then_place import OpenThenPlaceEnv
-from tasks.place_in import PlaceInEnv
+from wpbench.tasks.open_door import OpenDoorEnv
+from wpbench.tasks.open_then_place import OpenThenPlaceEnv
+from wpbench.tasks.place_in import PlaceInEnv
 
 # CLI name -> gymnasium id
 TASKS = {

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from mani_skill.utils.registration import register_env
 
-from tasks.base import ARTICULATED, CrossPoseEnv
+from wpbench.tasks.base import ARTICULATED, CrossPoseEnv
 
 START_FRACTION = (0.0, 0.25)   # start in the lower quarter of the joint range
 

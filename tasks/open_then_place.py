@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from mani_skill.utils.registration import register_env
 
-from tasks.base import ARTICULATED, FREE, CrossPoseEnv
-from tasks.open_door import START_FRACTION
+from wpbench.tasks.base import ARTICULATED, FREE, CrossPoseEnv
+from wpbench.tasks.open_door import START_FRACTION
 
 
 @register_env("wpbench/OpenThenPlace-v0", max_episode_steps=2)

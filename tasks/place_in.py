@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from mani_skill.utils.registration import register_env
 
-from tasks.base import FREE, CrossPoseEnv
+from wpbench.tasks.base import FREE, CrossPoseEnv
 
 
 @register_env("wpbench/PlaceIn-v0", max_episode_steps=1)

@@ -323,7 +323,7 @@ def test_run_weights_root_loads_the_experiment_and_writes_beside_it(runner, capt
     """--weights-root: the policy loads from that folder, the run goes to <root>/runs/."""
     import shutil
 
-    from policies.registry import make_policy
+    from wpbench.policies.registry import make_policy
 
     root = tmp_path / "experiment"
     shutil.copytree(repo_root / "policies" / "weights" / "gf", root / "gf", ignore=shutil.ignore_patterns("checkpoint.pt"))
@@ -341,7 +341,7 @@ def test_run_weights_root_loads_the_experiment_and_writes_beside_it(runner, capt
 
 
 def test_run_subsets_reaches_the_learned_policy_and_is_refused_for_the_others(runner, captured_runs):
-    from policies.registry import make_policy
+    from wpbench.policies.registry import make_policy
 
     result = runner.invoke(cli.app, ["run", "--policy", "oracle", "--task", "open-door", "--subsets", "2"])
     assert result.exit_code == 2 and "stopped by the test" in result.output
@@ -354,7 +354,7 @@ def test_run_subsets_reaches_the_learned_policy_and_is_refused_for_the_others(ru
 
 
 def test_run_no_mirror_views_reaches_the_learned_policy_and_is_refused_for_the_others(runner, captured_runs):
-    from policies.registry import make_policy
+    from wpbench.policies.registry import make_policy
 
     result = runner.invoke(cli.app, ["run", "--policy", "gf", "--task", "open-door", "--no-mirror-views"])
     assert result.exit_code == 2 and "stopped by the test" in result.output

@@ -7,7 +7,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import tasks  # noqa: F401
+from wpbench import tasks  # noqa: F401
 from wpbench.sim.executor import best_joint_value
 
 

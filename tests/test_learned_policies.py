@@ -9,8 +9,8 @@ import shutil
 import numpy as np
 import pytest
 
-from policies.learned import LearnedPolicy
-from policies.registry import make_policy
+from wpbench.policies.learned import LearnedPolicy
+from wpbench.policies.registry import make_policy
 from wpbench.data.synthetic import write_synthetic_split
 from wpbench.training.config import TrainConfig
 from wpbench.training.loop import train
@@ -172,7 +172,7 @@ def test_shipped_weights_load_and_answer(name):
 
 
 def test_shipped_weights_say_how_they_were_made():
-    from policies.learned import WEIGHTS_ROOT
+    from wpbench.policies.learned import WEIGHTS_ROOT
 
     best = json.loads((WEIGHTS_ROOT / "best.json").read_text())
     assert best["policy"] in ("wp-og", "wp-postsvd", "wp-postsvd-t")

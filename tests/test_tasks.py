@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-import tasks
-from tasks.base import ARTICULATED, FREE
+from wpbench import tasks
+from wpbench.tasks.base import ARTICULATED, FREE
 
 TASK_IDS = list(tasks.TASKS.values())
 

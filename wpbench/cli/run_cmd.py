@@ -22,7 +22,7 @@ def _learned_policies() -> tuple[str, ...]:
 
 
 def _policy_names() -> list[str]:
-    from policies.registry import available_policies
+    from wpbench.policies.registry import available_policies
 
     return available_policies()
 

@@ -53,7 +53,7 @@ def make_env(config: GenerationConfig, kind: str):
     """The task env for ``kind``; scenes are reloaded only when we ask (reconfiguration_freq=0)."""
     import gymnasium as gym
 
-    import tasks  # noqa: F401  (registers the wpbench envs)
+    from wpbench import tasks  # noqa: F401  (registers the wpbench envs)
 
     kwargs = dict(
         obs_mode=config.obs, assets=config.assets, split=config.split,

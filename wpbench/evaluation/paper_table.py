@@ -50,7 +50,7 @@ def _models_for(policy: str) -> dict[str, tuple]:
     The point counts are those the model was trained with (the learned policies subsample
     their observations to them too); the oracle routes each kind to its specialist.
     """
-    from policies.learned import LearnedPolicy
+    from wpbench.policies.learned import LearnedPolicy
 
     def loaded(name: str) -> tuple:
         learned = LearnedPolicy(policy=name)

@@ -55,7 +55,7 @@ def make_env(cfg: RunConfig):
     """The task's gymnasium env for this run (ManiSkill3 BaseEnv on the CPU)."""
     import gymnasium as gym
 
-    import tasks  # registers wpbench/* envs
+    from wpbench import tasks  # registers wpbench/* envs
 
     if cfg.task not in tasks.TASKS:
         raise ValueError(f"unknown task {cfg.task!r}; valid: {', '.join(tasks.TASKS)}")
@@ -174,7 +174,7 @@ def run_benchmark(
     """Run ``cfg`` and return its summary (also written to ``out/summary.json``)."""
     from tqdm import tqdm
 
-    from policies.registry import make_policy
+    from wpbench.policies.registry import make_policy
     from wpbench.evaluation.records import EpisodeWriter
     from wpbench.evaluation.summary import summarize, write_summary
 

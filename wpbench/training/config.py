@@ -8,8 +8,7 @@ from pathlib import Path
 
 def default_weights_root() -> Path:
     """``policies/weights`` of the installed ``policies`` package (where the learned policies look)."""
-    import policies
-
+    from wpbench import policies
     return Path(policies.__file__).resolve().parent / "weights"
 
 

@@ -1,0 +1,1 @@
+"""Furniture and object assets: procedural furniture, Ravens objects, real PartNet-Mobility folders."""
