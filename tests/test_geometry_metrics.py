@@ -35,7 +35,7 @@ def _rodrigues(axis, angle: float) -> torch.Tensor:
 
 
 def _acos_error_deg(R_pred: torch.Tensor, R_gt: torch.Tensor) -> torch.Tensor:
-    """DESIGN.md's formula verbatim: acos(clip((trace(R_pred^T R_gt) - 1) / 2, -1, 1))."""
+    """The textbook formula verbatim: acos(clip((trace(R_pred^T R_gt) - 1) / 2, -1, 1))."""
     cosine = ((R_pred.transpose(-1, -2) @ R_gt).diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2
     return torch.rad2deg(torch.acos(cosine.clamp(-1, 1)))
 

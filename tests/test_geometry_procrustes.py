@@ -1,4 +1,4 @@
-"""Weighted Procrustes, TAX-Pose dual-flow SVD and the WeightedPose SVD (DESIGN.md's J)."""
+"""Weighted Procrustes, TAX-Pose dual-flow SVD and the WeightedPose SVD (the J(R, t) of docs/design.md)."""
 
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ def _rodrigues(axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 def _objective(R, t, p, v, a, u, q, b, d, w) -> float:
-    """DESIGN.md's J(R, t) for one sample, in numpy float64, straight from the formula.
+    """The J(R, t) of docs/design.md for one sample, in numpy float64, straight from the formula.
 
     ``w`` scalar (the paper) or (NA,) (per-point variant: action pair i weighted
     (1 - w_i) a_i, flow pair i weighted w_i c_i, anchor block (1 - mean w)).

@@ -2,19 +2,17 @@
 
 An object at world pose ``O`` looks the same at ``O S`` for every symmetry ``S``
 of its group (object frame, ``wpbench.geometry.symmetry``). So if ``T`` takes it
-to its goal, so does every ``T O S O^-1``: these are its *equivalent goals*. A
-cube has 24 of them. Data generation stores the one that rotates least (a
-function of what a model sees). Metrics compare a prediction with the goal
-nearest to it in rotation. Training does too, but only among goals within a few degrees of
-the prediction (``within_deg``), else the stored one: a cube turned 44 degrees and
-one turned 46 degrees look alike, and a model that is nearly right for either
-should not be pulled towards a target 88 degrees away. Without that gate an
-untrained model, whose pose is arbitrary, would get a different target on every
-step, and per-point heads would learn the average of the 24 goals: the centre.
-The gate has a cost once a model is trained: the stored goal of a block turned
-near 45 degrees flips between two sides, and a gated target teaches the network
-to average them. Models that start from trained weights (the WeightedPose
-variants) therefore train with no gate (``within_deg`` 180; ``training.specs``).
+to its goal, so does every ``T O S O^-1``: these are its *equivalent goals*
+(:func:`equivalent_goals`; a cube has 24). Data generation stores the one that
+rotates least.
+
+:func:`nearest_goal` picks, per sample, the equivalent goal whose rotation is
+nearest to a prediction; training uses it as the target. With ``within_deg`` it
+keeps the stored goal unless another one lies within that angle of the
+prediction, a gate for models whose early predictions are arbitrary. The
+training default is no gate (``within_deg`` 180, ``PolicySpec.retarget_within_deg``
+in ``wpbench.training.specs``; ``wpbench train --retarget-within DEG`` changes it).
+Why the default is what it is: docs/experiment-log.md.
 
 Only the discrete part of a group is enumerated: an object with a continuous
 axis (a disk, a bowl) gets its discrete elements, which is exact for none of

@@ -11,7 +11,7 @@ The result is a public format read by the leaderboard; its keys:
 - ``rot_err_deg``, ``trans_err_m``, ``point_err_m``, ``point_mse``: each
   ``{"mean", "median", "nan_count", "n"}`` over the finite values
 - ``nan_failures``: episodes the task called successful but whose pose errors
-  were NaN; a NaN error always counts as a failure (DESIGN.md), never as 0
+  were NaN; a NaN error always counts as a failure (docs/design.md), never as 0
 - ``per_category``: ``{category: {"episodes", "successes", "success_rate",
   "success_ci95", "rot_err_deg_mean", "trans_err_m_mean", "point_err_m_mean",
   "nan_count"}}``

@@ -1,6 +1,6 @@
 """Pure-torch geometry: SE(3) helpers, weighted Procrustes / WeightedPose SVD, pose metrics, symmetry groups.
 
-Conventions (DESIGN.md): 4x4 homogeneous transforms on column vectors,
+Conventions (docs/design.md): 4x4 homogeneous transforms on column vectors,
 ``p' = R p + t``; quaternions (w, x, y, z); point clouds (B, N, 3) in the
 world frame. Nothing here imports the simulator.
 """

@@ -1,4 +1,4 @@
-"""Pose-error metrics for cross-poses (DESIGN.md "Metrics").
+"""Pose-error metrics for cross-poses (docs/design.md, "Metrics").
 
 Convention: transforms ``T`` are 4x4 homogeneous matrices on column vectors,
 ``p' = R p + t``; a cross-pose moves the action object from where it is now to
@@ -24,7 +24,7 @@ lower bound), and removing the twist of ``F`` about ``a`` leaves a pure swing
 whose angle is exactly that (so it is attained).
 
 Angles are computed as ``atan2(|vee(E - E^T)| / 2, (trace(E) - 1) / 2)``: for
-a rotation this equals DESIGN.md's ``acos(clip((trace - 1) / 2, -1, 1))`` but
+a rotation this equals the textbook ``acos(clip((trace - 1) / 2, -1, 1))`` but
 keeps full precision near 0 and 180 degrees, where acos of a rounded cosine
 would report e.g. ~0.03 deg in float32 for identical rotations; its gradient
 is finite at zero error.

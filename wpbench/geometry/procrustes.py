@@ -13,7 +13,7 @@ with weighted centroids, the weighted cross-covariance
 orthogonal fit is a reflection) and ``t = y_bar - R s_bar``.
 
 ``dual_flow_svd`` (TAX-Pose, ``w = 0``) and ``weighted_pose_svd`` (WeightedPose)
-build one stacked Procrustes problem exactly as DESIGN.md states:
+build one stacked Procrustes problem (derived in docs/design.md):
 
     J(R, t) = (1 - w) [ sum_i a_i |R p_i + t - v_i|^2 + sum_j b_j |R u_j + t - q_j|^2 ]
             +  w      sum_i c_i |R p_i + t - (p_i + d_i)|^2
@@ -275,7 +275,7 @@ def weighted_pose_svd(
 ) -> torch.Tensor:
     """WeightedPose: one weighted Procrustes mixing TAX-Pose and Goal Flow by ``w``.
 
-    Minimises DESIGN.md's ``J(R, t)`` (module docstring) on the stacked pairs
+    Minimises ``J(R, t)`` (module docstring) on the stacked pairs
     ``source = [p; u; p]``, ``target = [v; q; p + d]`` with per-pair weights
 
     - per-sample ``w`` (B,) (the paper): ``(1 - w) a_hat_i``, ``(1 - w) b_hat_j``,

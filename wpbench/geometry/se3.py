@@ -1,6 +1,6 @@
 """SE(3) helpers: rigid transforms as 4x4 homogeneous matrices.
 
-Convention (DESIGN.md): a pose / cross-pose ``T`` is a 4x4 matrix acting on
+Convention (docs/design.md): a pose / cross-pose ``T`` is a 4x4 matrix acting on
 column vectors, ``p' = R p + t`` with ``R = T[..., :3, :3]`` and
 ``t = T[..., :3, 3]``; the last row is ``[0, 0, 0, 1]``. Quaternions are
 ``(w, x, y, z)`` as in SAPIEN. Point clouds are row-stacked ``(..., N, 3)``.

@@ -3,11 +3,10 @@
 Kept apart from the modules so that listing models or validating a config
 (CLI, policy registry) does not pay for importing torch.
 
-Default sizes are chosen for a laptop CPU (see ``wpbench.bench.models``):
-the reference TAX-Pose uses DGCNN widths (64, 64, 128, 256), 512-dim
-embeddings and k = 20 neighbours on 200 + 1800 points, which costs ~0.7 s per
-inference and ~47 s per training step at batch 16 on 2 cores. wpbench keeps
-the architecture (dynamic-graph edge convolutions, cross-attention, soft
+Default sizes are chosen for a laptop CPU (``wpbench bench models`` compares
+them): the reference TAX-Pose uses DGCNN widths (64, 64, 128, 256), 512-dim
+embeddings and k = 20 neighbours on 200 + 1800 points, too slow to train on
+2 cores (costs in docs/models.md). wpbench keeps the architecture (dynamic-graph edge convolutions, cross-attention, soft
 correspondences, residual flow, weighted SVD) and shrinks widths and k.
 ``<Config>.reference()`` gives the reference size for comparison.
 """
@@ -39,8 +38,8 @@ class DGCNNConfig:
         convolution after the first (DGCNN's "dynamic" graph); the first always
         uses xyz. False (the laptop default) keeps the xyz graph throughout:
         the feature-space kNN (a (N, N) distance matrix and a top-k per layer)
-        measured ~30% of a WeightedPose training step and ~half of its
-        inference time. The reference size keeps the dynamic graph.
+        is a large share of a step's cost on a CPU (docs/models.md). The
+        reference size keeps the dynamic graph.
     groups: GroupNorm groups (normalisation is per sample, so a sample's output
         never depends on the rest of the batch).
     """
@@ -150,9 +149,8 @@ class GoalFlowConfig:
         return cls(encoder=DGCNNConfig.reference(), head_hidden=256)
 
 
-# Values the fields above had before their defaults changed. A model saved before
-# the change has no such key in its config.json and was trained with this value,
-# not with today's default (``wpbench.models.registry.saved_model_config``).
+# Values a saved Goal Flow config.json without these keys was trained with; they differ
+# from the defaults above (``wpbench.models.registry.saved_model_config``).
 GOALFLOW_FIELDS_BEFORE_DEFAULT_CHANGE: dict[str, Any] = {"anchor_extent": False, "heading_source": "centroids"}
 
 

@@ -41,12 +41,10 @@ class GoalFlow(nn.Module):
         # Point feature + global feature + the point's own centred xyz: the goal flow of a
         # rigid motion is affine in the point position, (R - I) p + t, which the xyz skip
         # connection makes easy to express. The xyz is scaled (position_scale) to unit size:
-        # in metres a 10 cm object gives inputs ~0.05, whose weights learn slowly (without the
-        # scaling the one-sample overfit plateaued at ~1.5 cm mean point error, with it < 1 cm).
-        # Optional: the anchor's bounding box (2 corners = 6 numbers) joins the global feature.
-        # Measured on data3 (val, 4 unseen chests of drawers): Goal Flow's predicted drawer travel
-        # did not correlate with the true one (r = -0.06; 0.39 on near-closed train drawers), i.e. it could not
-        # read the furniture's depth from max-pooled point features.
+        # in metres a 10 cm object gives inputs ~0.05, whose weights learn slowly.
+        # Optional: the anchor's bounding box (2 corners = 6 numbers) joins the global feature,
+        # a direct signal of the furniture's depth, which max-pooled point features carry
+        # poorly (docs/experiment-log.md).
         extent = 6 if self.config.anchor_extent else 0
         self.flow_head = head_mlp(2 * dim + 3 + extent, self.config.head_hidden, 3)
         # The flow of a rigid motion is affine in the point, (R - I) p + t. This head reads the

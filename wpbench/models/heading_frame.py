@@ -13,10 +13,9 @@ A second choice of direction, ``source="action_panel"``, is the normal of
 the action object's footprint: the least-spread horizontal axis of its points,
 signed to point away from the anchor's centroid. A closed door or drawer is
 seen as a vertical panel on the furniture's front, so that normal is the
-front direction itself. Measured on the data3 val drawers, the centroid
-direction is a median 54 deg off the direction the drawer slides (a drawer's
-centroid sits above, below or beside the chest's, hardly in front of it);
-the panel normal is 10 deg off.
+front direction itself, whereas a drawer's centroid sits above, below or
+beside the chest's, hardly in front of it, so the centroid direction can be
+far from the direction the drawer slides (docs/models.md has the numbers).
 
 Either frame is a function of the input clouds, so a model run in it is exactly
 equivariant to yaw: turning the scene by ``A`` turns the prediction to

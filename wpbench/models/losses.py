@@ -84,7 +84,7 @@ def translation_loss(T_pred: torch.Tensor, T_gt: torch.Tensor, centroid: torch.T
 
     The centroid's goal, not the raw |t_pred - t_gt|: the raw translation of a
     pose depends on where the world origin is (rotating about a far origin
-    moves t a lot), the centroid's goal does not (DESIGN.md's translation error).
+    moves t a lot), the centroid's goal does not (the translation error of docs/design.md).
     """
     if centroid.dim() != 2 or centroid.shape[-1] != 3:
         raise ValueError(f"centroid must have shape (B, 3), got {tuple(centroid.shape)}")

@@ -52,10 +52,9 @@ def model_config(name: str, config: Any | None = None, **overrides: Any) -> Any:
 def saved_model_config(name: str, saved: dict[str, Any]) -> Any:
     """The config of a saved model (the ``model_config`` dict of its config.json).
 
-    A field the saved dict lacks takes the value it had when the model was trained:
-    today's default, except for the Goal Flow fields whose default changed since
-    (``GOALFLOW_FIELDS_BEFORE_DEFAULT_CHANGE``), so that old weights still load as
-    the network they were trained as.
+    A field the saved dict lacks takes its default, except the Goal Flow fields of
+    ``GOALFLOW_FIELDS_BEFORE_DEFAULT_CHANGE``, which take the value listed there, so
+    that every saved model loads as the network it was trained as.
     """
     _check_name(name)
     base = MODEL_CONFIGS[name]()

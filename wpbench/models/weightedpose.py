@@ -2,7 +2,7 @@
 
 Both branches see the same (action, anchor) clouds. Goal Flow gives a flow
 ``d`` and the mixing weight ``w``; TAX-Pose gives (v, a, u, b). One
-``weighted_pose_svd`` solves DESIGN.md's objective: ``w -> 1`` trusts the
+``weighted_pose_svd`` solves the objective of docs/design.md: ``w -> 1`` trusts the
 flow (articulated parts), ``w -> 0`` the correspondences (free objects).
 
 Starting from trained branches::

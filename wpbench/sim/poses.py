@@ -1,6 +1,6 @@
 """Conversions between SAPIEN poses and 4x4 matrices (numpy, float64).
 
-Convention (DESIGN.md): 4x4 homogeneous matrices acting on column vectors,
+Convention (docs/design.md): 4x4 homogeneous matrices acting on column vectors,
 ``p' = R p + t``; quaternions (w, x, y, z) as in SAPIEN.
 """
 
