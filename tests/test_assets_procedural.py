@@ -13,7 +13,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from wpbench.assets import library
-from wpbench.assets.procedural import CATEGORIES, GENERATOR_VERSION, build_blueprint, generate_library, generate_object
+from wpbench.assets.procedural import (
+    CATEGORIES,
+    GENERATOR_VERSION,
+    TEST_PER_CATEGORY,
+    build_blueprint,
+    generate_library,
+    generate_object,
+)
 from wpbench.assets.procedural.blueprint import MIN_CAVITY_EXTENT
 from wpbench.assets.procedural.generate import split_of
 from wpbench.assets.procedural.parts import boxes_overlap
@@ -223,8 +230,10 @@ def test_load_library_filters_by_split_and_category(small_library):
     assert len(library.load_library(out)) == 4 * len(CATEGORIES)
     ovens = library.load_library(out, split="train", categories=["oven"])
     assert [a.object_id for a in ovens] == ["oven-0000", "oven-0001", "oven-0002"]
-    with pytest.raises(ValueError, match="valid splits: train, val"):
+    with pytest.raises(ValueError, match="has no test instances"):
         library.load_library(out, split="test")
+    with pytest.raises(ValueError, match="valid splits: train, val, test"):
+        library.load_library(out, split="holdout")
     with pytest.raises(ValueError, match="valid categorys: .*microwave"):
         library.load_library(out, categories=["bathtub"])
     with pytest.raises(ValueError, match="neither 'procedural' nor an existing folder"):
@@ -234,7 +243,7 @@ def test_load_library_filters_by_split_and_category(small_library):
 def test_procedural_library_is_generated_once_into_the_cache(tmp_path, monkeypatch):
     monkeypatch.setenv("WPBENCH_CACHE", str(tmp_path))
     folder = library.procedural_library(seed=2, per_category=2)
-    assert folder == tmp_path / "procedural" / f"seed-2-n2-v{GENERATOR_VERSION}"
+    assert folder == tmp_path / "procedural" / f"seed-2-n2-v{GENERATOR_VERSION}-t{TEST_PER_CATEGORY}"
     assert (folder / "split.json").is_file()
     stamp = (folder / "split.json").stat().st_mtime_ns
     assert library.procedural_library(seed=2, per_category=2) == folder
@@ -267,7 +276,7 @@ def test_cli_generate_and_list(tmp_path):
     out = tmp_path / "lib"
     result = runner.invoke(app, ["generate", "--out", str(out), "--per-category", "2", "--seed", "4", "--category", "safe", "--category", "oven"])
     assert result.exit_code == 0, result.output
-    assert "wrote 4 objects (2 train, 2 val)" in result.output
+    assert "wrote 20 objects (2 train, 2 val, 16 test)" in result.output
     assert json.loads((out / "split.json").read_text())["val"] == ["safe-0001", "oven-0001"]
     result = runner.invoke(app, ["list", "--assets", str(out), "--split", "train"])
     assert result.exit_code == 0, result.output

@@ -26,7 +26,7 @@ KINDS = (ARTICULATED, FREE)
 KIND_CODE = {ARTICULATED: 0, FREE: 1}
 
 # Furniture splits of the built-in library. "all" (runs only) means every instance.
-SPLITS = ("train", "val")
+SPLITS = ("train", "val", "test")
 RUN_SPLITS = (*SPLITS, "all")
 
 OBS_MODES = ("camera", "mesh")

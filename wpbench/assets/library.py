@@ -1,10 +1,16 @@
 """Find furniture: the built-in procedural library (generated once, cached) or a folder.
 
 ``load_library("procedural", split="train")`` is what tasks call. The procedural
-library lives in ``$WPBENCH_CACHE/procedural/seed-<S>-n<N>-v<G>`` (``$WPBENCH_CACHE``
+library lives in ``$WPBENCH_CACHE/procedural/seed-<S>-n<N>-v<G>-t<T>`` (``$WPBENCH_CACHE``
 defaults to ``~/.cache/wpbench``); it is generated into a temporary sibling folder
 and renamed into place, so a crash or a concurrent run never leaves a half-written
 library behind.
+
+Splits: ``train`` (training data), ``val`` (model selection and development numbers)
+and ``test`` (held out: scored once per release of the weights, after every choice is
+made). Test instances are numbered apart from the others
+(``wpbench.assets.procedural.TEST_FIRST_INDEX``), so no train or val instance, and no
+extra training instance, can ever be one of them.
 """
 
 from __future__ import annotations
@@ -19,10 +25,9 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from wpbench.assets.spec import FurnitureAsset
+from wpbench.names import SPLITS
 
 log = logging.getLogger(__name__)
-
-SPLITS = ("train", "val")
 
 
 def cache_root() -> Path:
@@ -37,17 +42,21 @@ def default_val_per_category(per_category: int) -> int:
 
 
 def procedural_library(seed: int = 0, per_category: int = 16, cache_dir: Path | None = None,
-                       extra_train: int = 0) -> Path:
+                       extra_train: int = 0, test_per_category: int | None = None) -> Path:
     """Folder of the procedural library for (seed, per_category), generating it on first use.
 
     ``cache_dir`` replaces ``cache_root()``; the library goes to
-    ``<cache>/procedural/seed-<seed>-n<per_category>-v<generator version>`` (plus
-    ``-x<extra_train>`` with extra training instances: same val split, more train furniture).
+    ``<cache>/procedural/seed-<seed>-n<per_category>-v<generator version>`` plus
+    ``-x<extra_train>`` with extra training instances (same val split, more train
+    furniture) and ``-t<test_per_category>`` (default ``TEST_PER_CATEGORY``) with test
+    instances.
     """
-    from wpbench.assets.procedural import GENERATOR_VERSION, generate_library
+    from wpbench.assets.procedural import GENERATOR_VERSION, TEST_PER_CATEGORY, generate_library
 
+    tests = TEST_PER_CATEGORY if test_per_category is None else int(test_per_category)
     root = Path(cache_dir) if cache_dir is not None else cache_root()
-    name = f"seed-{int(seed)}-n{int(per_category)}-v{GENERATOR_VERSION}" + (f"-x{int(extra_train)}" if extra_train else "")
+    name = (f"seed-{int(seed)}-n{int(per_category)}-v{GENERATOR_VERSION}" + (f"-x{int(extra_train)}" if extra_train else "")
+            + (f"-t{tests}" if tests else ""))
     folder = root / "procedural" / name
     if (folder / "split.json").is_file():
         return folder
@@ -56,7 +65,7 @@ def procedural_library(seed: int = 0, per_category: int = 16, cache_dir: Path | 
     try:
         log.info("generating the procedural furniture library into %s", folder)
         generate_library(tmp, per_category=per_category, val_per_category=default_val_per_category(per_category), seed=seed,
-                         extra_train=extra_train)
+                         extra_train=extra_train, test_per_category=tests)
         try:
             os.rename(tmp, folder)
         except OSError:
@@ -79,6 +88,9 @@ def _check_names(kind: str, given: Iterable[str] | None, valid: Iterable[str]) -
 def _load_split_folder(folder: Path, split: str | None) -> list[FurnitureAsset]:
     meta = json.loads((folder / "split.json").read_text())
     ids = [(i, s) for s in SPLITS if split in (None, s) for i in meta.get(s, [])]
+    if split is not None and not ids:
+        raise ValueError(f"{folder} has no {split} instances; generate the library with some "
+                         f"(wpbench assets generate --out DIR, see --help)")
     assets = []
     for object_id, s in ids:
         spec = folder / object_id / "wpbench.json"
@@ -108,11 +120,12 @@ def load_library(
             a folder with ``split.json`` and ``<id>/wpbench.json`` (a generated library),
             or any other folder, read by ``wpbench.assets.partnet.load_partnet_folder``
             (PartNet-Mobility objects; those that fail to load are logged and skipped).
-        split: "train", "val" or None for all. PartNet-Mobility objects carry no split:
-            the split is ignored for them (they are all held-out objects).
+        split: "train", "val", "test" or None for all. PartNet-Mobility objects carry no
+            split: the split is ignored for them (they are all held-out objects).
         categories: keep only these categories (None: all).
         extra_train: procedural only: that many more training instances per category
-            (for training data; the val instances are unchanged).
+            (for training data; the val and test instances are unchanged and can never
+            be among them).
 
     Raises:
         ValueError: unknown split or category (the message lists the valid ones), or a

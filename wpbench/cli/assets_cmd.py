@@ -6,6 +6,8 @@ from pathlib import Path
 
 import typer
 
+from wpbench.names import SPLITS
+
 app = typer.Typer(help="Generate, list and render furniture assets.", add_completion=False, no_args_is_help=True)
 
 
@@ -21,31 +23,34 @@ def generate(
     val_per_category: int = typer.Option(None, min=0, help="Validation objects per category [default: a quarter]."),
     seed: int = typer.Option(0, help="Library seed; the same seed writes byte-identical files."),
     category: list[str] = typer.Option(None, help="Only this category (repeatable) [default: all]."),
+    test_per_category: int = typer.Option(None, min=0, help="Held-out test objects per category [default: as in the built-in library]."),
 ) -> None:
     """Write procedural furniture (PartNet-Mobility layout) and split.json into OUT."""
     from tqdm import tqdm
 
     from wpbench.assets.library import default_val_per_category, procedural_library
-    from wpbench.assets.procedural import CATEGORIES, generate_library
+    from wpbench.assets.procedural import CATEGORIES, TEST_PER_CATEGORY, generate_library
 
     for c in category or ():
         if c not in CATEGORIES:
             _fail(f"unknown category {c!r}; valid: {', '.join(CATEGORIES)}")
     if out is None:
-        if category or val_per_category is not None:
-            _fail("--category and --val-per-category need --out (the cache always holds the full default library)")
+        if category or val_per_category is not None or test_per_category is not None:
+            _fail("--category, --val-per-category and --test-per-category need --out "
+                  "(the cache always holds the full default library)")
         folder = procedural_library(seed=seed, per_category=per_category)
         typer.echo(f"procedural library (seed {seed}, {per_category} per category): {folder}")
         return
     val = default_val_per_category(per_category) if val_per_category is None else val_per_category
     if val >= per_category:
         _fail(f"--val-per-category ({val}) must be smaller than --per-category ({per_category})")
+    tests = TEST_PER_CATEGORY if test_per_category is None else test_per_category
     assets = generate_library(
         out, per_category=per_category, val_per_category=val, seed=seed, categories=category or None,
-        progress=lambda jobs: tqdm(jobs, desc="furniture", unit="obj"),
+        progress=lambda jobs: tqdm(jobs, desc="furniture", unit="obj"), test_per_category=tests,
     )
-    n_val = sum(a.split == "val" for a in assets)
-    typer.echo(f"wrote {len(assets)} objects ({len(assets) - n_val} train, {n_val} val) to {out}")
+    counts = ", ".join(f"{sum(a.split == s for a in assets)} {s}" for s in SPLITS)
+    typer.echo(f"wrote {len(assets)} objects ({counts}) to {out}")
 
 
 def _find(asset_id: str, assets: str, seed: int, per_category: int):
@@ -82,7 +87,7 @@ def show(
 @app.command("list")
 def list_assets(
     assets: str = typer.Option("procedural", help="'procedural' or a folder of assets."),
-    split: str = typer.Option(None, help="train or val [default: both]."),
+    split: str = typer.Option(None, help="train, val or test [default: all]."),
     category: list[str] = typer.Option(None, help="Only this category (repeatable)."),
     seed: int = typer.Option(0, help="Seed of the procedural library."),
     per_category: int = typer.Option(16, min=1, help="Size of the procedural library."),

@@ -1,8 +1,12 @@
-"""Generate procedural furniture folders and a fixed train/val split.
+"""Generate procedural furniture folders and a fixed train/val/test split.
 
 Each instance draws from its own numpy Generator seeded by (library seed, category,
 index), so an object does not change when other categories or counts change, and
 the same seed writes byte-identical files.
+
+Indices ``0 .. per_category - 1`` are train then val, extra training instances follow
+them, and test instances are numbered from :data:`TEST_FIRST_INDEX`, which no train or
+val index may reach: a test instance is never one that was trained or selected on.
 """
 
 from __future__ import annotations
@@ -31,6 +35,11 @@ BUILDERS: dict[str, Callable[[np.random.Generator, str], Blueprint]] = {
     "storage": storage.build,
 }
 CATEGORIES: tuple[str, ...] = tuple(BUILDERS)
+
+# Test instances are numbered from here; per_category + extra_train may not reach it.
+TEST_FIRST_INDEX = 9000
+# Test instances per category in the built-in library.
+TEST_PER_CATEGORY = 8
 
 
 def check_category(category: str) -> None:
@@ -106,8 +115,18 @@ def _plain(value):
 
 
 def split_of(index: int, per_category: int, val_per_category: int) -> str:
-    """The last ``val_per_category`` indices of each category are validation."""
-    return "val" if index >= per_category - val_per_category else "train"
+    """Split of instance ``index``: the last ``val_per_category`` of the first ``per_category``
+    are validation, indices from :data:`TEST_FIRST_INDEX` are test, every other one is train."""
+    if index >= TEST_FIRST_INDEX:
+        return "test"
+    if per_category - val_per_category <= index < per_category:
+        return "val"
+    return "train"
+
+
+def indices_of_test_split(test_per_category: int) -> range:
+    """Indices of the test instances of each category."""
+    return range(TEST_FIRST_INDEX, TEST_FIRST_INDEX + int(test_per_category))
 
 
 def generate_library(
@@ -118,14 +137,18 @@ def generate_library(
     categories: Iterable[str] | None = None,
     progress: Callable[[Iterable], Iterable] | None = None,
     extra_train: int = 0,
+    test_per_category: int = 0,
 ) -> list[FurnitureAsset]:
     """Write ``per_category`` objects of each category into ``out`` plus ``split.json``.
 
-    ``split.json`` = {"train": [ids], "val": [ids], "seed": S, "per_category": N,
-    "val_per_category": V, "extra_train": X, "generator_version": G, "categories": [...]}.
+    ``split.json`` = {"train": [ids], "val": [ids], "test": [ids], "seed": S,
+    "per_category": N, "val_per_category": V, "extra_train": X, "test_per_category": T,
+    "test_first_index": I, "generator_version": G, "categories": [...]}.
     ``extra_train``: further training instances per category, numbered after the
     first ``per_category`` (an instance does not depend on the library size, so the
     val instances stay exactly those of the library without them).
+    ``test_per_category``: held-out test instances per category, numbered from
+    :data:`TEST_FIRST_INDEX` (they leave every train and val instance unchanged).
     ``progress`` optionally wraps the job list (e.g. ``tqdm``).
     """
     categories = tuple(categories) if categories is not None else CATEGORIES
@@ -137,20 +160,28 @@ def generate_library(
         raise ValueError(f"val_per_category must be in [0, per_category), got {val_per_category} with per_category={per_category}")
     if extra_train < 0:
         raise ValueError(f"extra_train must be >= 0, got {extra_train}")
+    if per_category + extra_train > TEST_FIRST_INDEX:
+        raise ValueError(f"per_category + extra_train must be at most {TEST_FIRST_INDEX} (test instances are numbered "
+                         f"from there), got {per_category} + {extra_train}")
+    if test_per_category < 0:
+        raise ValueError(f"test_per_category must be >= 0, got {test_per_category}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [(c, i) for c in categories for i in range(per_category + extra_train)]
+    indices = [*range(per_category + extra_train), *indices_of_test_split(test_per_category)]
+    jobs = [(c, i) for c in categories for i in indices]
     assets = []
     for c, i in progress(jobs) if progress else jobs:
-        split = "train" if i >= per_category else split_of(i, per_category, val_per_category)
-        assets.append(generate_object(c, i, out, seed, split))
+        assets.append(generate_object(c, i, out, seed, split_of(i, per_category, val_per_category)))
     split = {
         "train": [a.object_id for a in assets if a.split == "train"],
         "val": [a.object_id for a in assets if a.split == "val"],
+        "test": [a.object_id for a in assets if a.split == "test"],
         "seed": int(seed),
         "per_category": int(per_category),
         "val_per_category": int(val_per_category),
         "extra_train": int(extra_train),
+        "test_per_category": int(test_per_category),
+        "test_first_index": TEST_FIRST_INDEX,
         "categories": list(categories),
         "generator_version": GENERATOR_VERSION,
     }
