@@ -1,9 +1,10 @@
 """What a policy is to wpbench: something that maps one observation to one cross-pose.
 
-``obs`` (numpy, unbatched, world frame): ``action_points`` (NA, 3) float32,
-``anchor_points`` (NB, 3) float32, ``kind`` (0 articulated, 1 free-floating),
-``stage`` (int). ``info`` carries the ground truth (``gt_cross_pose``, (4, 4));
-only reference policies (``gt``) and the ``oracle`` switcher may read it.
+``obs`` (numpy, unbatched, world frame): ``action_points`` (NA, 3) float32 and
+``anchor_points`` (NB, 3) float32, the segmented clouds, and nothing else.
+``info`` is the env's ground truth (``CrossPoseEnv.ground_truth()``: ``cross_pose``
+(4, 4), ``kind``, ``stage``), given only to policies with ``uses_ground_truth = True``
+(the ``gt`` reference and the ``oracle`` switcher); every other policy gets ``None``.
 """
 
 from __future__ import annotations

@@ -22,6 +22,6 @@ class GroundTruthPolicy(Policy):
         self.config = config or GroundTruthConfig()
 
     def predict(self, obs: dict[str, Any], info: dict[str, Any] | None = None) -> PolicyOutput:
-        if info is None or "gt_cross_pose" not in info:
-            raise ValueError("the gt policy needs info['gt_cross_pose'] from the task")
-        return PolicyOutput(np.asarray(info["gt_cross_pose"], dtype=np.float64).reshape(4, 4).copy())
+        if info is None or "cross_pose" not in info:
+            raise ValueError("the gt policy needs the env's ground truth as info (env.unwrapped.ground_truth())")
+        return PolicyOutput(np.asarray(info["cross_pose"], dtype=np.float64).reshape(4, 4).copy())

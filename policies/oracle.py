@@ -11,10 +11,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
+from wpbench.names import ARTICULATED, KINDS
 from wpbench.policies.base import Policy, PolicyConfig, PolicyOutput
 from wpbench.models.configs import DEFAULT_MIRROR_VIEWS, DEFAULT_SUBSETS
 
-KIND_NAMES = {0: "articulated", 1: "free-floating", "articulated": "articulated", "free-floating": "free-floating"}
 
 
 @dataclass
@@ -37,18 +37,16 @@ class OraclePolicy(Policy):
         shared = {"weights_root": self.config.weights_root, "subsets": self.config.subsets,
                   "mirror_views": self.config.mirror_views}
         self.experts = {
-            "articulated": LearnedPolicy(policy=self.config.articulated_policy, **shared),
-            "free-floating": LearnedPolicy(policy=self.config.free_policy, **shared),
+            kind: LearnedPolicy(policy=self.config.articulated_policy if kind == ARTICULATED else self.config.free_policy,
+                                **shared)
+            for kind in KINDS
         }
 
     def predict(self, obs: dict[str, Any], info: dict[str, Any] | None = None) -> PolicyOutput:
-        kind = (info or {}).get("kind", obs.get("kind"))
-        if hasattr(kind, "item"):
-            kind = kind.item()
-        if kind not in KIND_NAMES:
-            raise ValueError(f"oracle needs the ground-truth kind in info['kind'] or obs['kind'] "
-                             f"(0/'articulated' or 1/'free-floating'), got {kind!r}")
-        kind = KIND_NAMES[kind]
+        kind = (info or {}).get("kind")
+        if kind not in KINDS:
+            raise ValueError(f"oracle needs the ground-truth kind in info['kind'] (one of {', '.join(KINDS)}), "
+                             f"got {kind!r}: give it the env's ground_truth()")
         out = self.experts[kind].predict(obs)
         out.diagnostics["oracle_choice"] = kind
         return out

@@ -12,7 +12,7 @@ POLICIES="${POLICIES:-gt identity}"
 EPISODES="${EPISODES:-50}"
 PARTNET="${PARTNET:-../shared/partnet-mobility}"
 PARTNET_EPISODES="${PARTNET_EPISODES:-$EPISODES}"
-TASKS="${TASKS:-open-door place-in open-then-place}"
+TASKS="${TASKS:-$(.venv/bin/python -c 'from wpbench.names import BUILTIN_TASKS; print(*BUILTIN_TASKS)')}"
 WEIGHTS=()
 if [ -n "${WEIGHTS_ROOT:-}" ]; then WEIGHTS=(--weights-root "$WEIGHTS_ROOT"); fi
 for obs in ${OBS:-camera mesh}; do

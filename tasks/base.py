@@ -12,12 +12,19 @@ Observation (``obs_mode``):
     ``"camera"`` (default): point clouds from a SAPIEN depth + segmentation camera
     at a random viewpoint in front of the furniture; ``"mesh"``: surface samples of
     the collision geometry (no renderer needed).
-    ``obs = {"action_points": (1, NA, 3), "anchor_points": (1, NB, 3),
-    "kind": (1,) 0 articulated / 1 free-floating, "stage": (1,)}`` (batched torch,
-    as every ManiSkill env; wrap with ``CPUGymWrapper`` for numpy).
+    ``obs = {"action_points": (1, NA, 3), "anchor_points": (1, NB, 3)}`` (batched torch,
+    as every ManiSkill env; wrap with ``CPUGymWrapper`` for numpy): the segmented clouds,
+    what a robot's camera and segmenter would give. Nothing in it says which kind of goal
+    the stage has.
 Action: the cross-pose, a (4, 4) matrix ``T`` with ``p_goal = T p_now`` (world frame).
-Info: ``gt_cross_pose`` (1, 4, 4) for the current stage, ``success``, and after a
-step ``stage_result`` (metrics and the executor's report).
+Info: ``success``, ``stages_done``, and after a step ``stage_result`` (metrics and the
+executor's report).
+Ground truth: :meth:`CrossPoseEnv.ground_truth`, the one channel through which the true
+cross-pose and kind of the current stage leave the env (only privileged policies get it).
+``reset(options=...)`` keys: ``"reconfigure"`` (ManiSkill's: load a new furniture
+instance), ``"restart_rng"`` (draw the furniture from the episode seed alone, as on a
+fresh env), ``"start_fraction"`` (articulated stages: start the joint at this fraction of
+the way from closed to open instead of the task's own draw).
 """
 
 from __future__ import annotations
@@ -37,16 +44,20 @@ from wpbench.sim.executor import execute_articulated, execute_free
 from wpbench.sim.free_object import build_free_object, raw_body
 from wpbench.sim.furniture import SceneFurniture
 from wpbench.sim.observation import camera_points_by_segment, fixed_size, sample_mesh_surface
+from wpbench.names import ARTICULATED, FREE, OBS_MODES
 from wpbench.sim.poses import matrix_to_pose, pose_to_matrix, project_to_rigid, transform_points, yaw_matrix
 
-ARTICULATED, FREE = "articulated", "free-floating"
-KIND_CODE = {ARTICULATED: 0, FREE: 1}
-OBS_MODES = ("camera", "mesh")
 SIM_FREQ = 200
 METRIC_POINTS = 512        # surface samples of the action object used for the point metrics
-OPEN_TOLERANCE = 0.1       # DESIGN.md: normalised distance to the open limit
+OPEN_TOLERANCE = 0.1       # docs/design.md: normalised distance to the open limit
+AT_REST_JOINT_SPEED = 0.05        # rad/s or m/s: a joint slower than this is at rest
+AT_REST_LINEAR_SPEED = 0.05       # m/s: a free object slower than this (and ...)
+AT_REST_ANGULAR_SPEED = 0.5       # rad/s: ... turning slower than this is at rest
 CAMERA_FOV = 1.0           # rad, vertical
 SUCCESS_CHECK_STRIDE = 10  # physics steps between checks of the success condition while simulating
+
+
+RESET_OPTIONS = frozenset({"reconfigure", "env_idx", "restart_rng", "start_fraction"})
 
 
 @dataclass
@@ -138,6 +149,13 @@ class CrossPoseEnv(BaseEnv):
     def reset(self, seed=None, options=None):
         # gymnasium's checker (and gym.Env users) expect np_random to follow the seed;
         # ManiSkill keeps its own RNGs and does not call gym.Env.reset.
+        unknown = set(options or {}) - RESET_OPTIONS
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {sorted(unknown)}; valid: {sorted(RESET_OPTIONS)}")
+        if (options or {}).get("restart_rng"):
+            # The furniture is drawn from an rng counter that otherwise carries over from
+            # earlier episodes; restarting it makes the scene a function of the seed only.
+            self._rng_counter = -1
         if seed is not None:
             first = seed[0] if isinstance(seed, (list, tuple)) else seed
             self._np_random, self._np_random_seed = gym.utils.seeding.np_random(int(first))
@@ -216,6 +234,11 @@ class CrossPoseEnv(BaseEnv):
         self._initialize_task(rng, options)
         if self.observation_source == "camera":
             self._place_camera(rng)
+        fraction = options.get("start_fraction")
+        if fraction is not None:
+            if self.stage_kind != ARTICULATED:
+                raise ValueError("reset option 'start_fraction' needs a task whose first stage is articulated")
+            self.furniture.set_target_qpos(self.joint_fraction(float(fraction)))
         self._stage_state = self._make_stage_state()
         self._obs_cache = None
 
@@ -305,6 +328,27 @@ class CrossPoseEnv(BaseEnv):
         goal[:3, 3] = floor + (self.free_spec.rest_half_height * self.free_scale + 2e-3) * np.array([0, 0, 1.0])
         return goal
 
+    # ------------------------------------------------------------------ ground truth
+    def ground_truth(self) -> dict[str, Any]:
+        """The current stage's truth: ``cross_pose`` (4, 4) float64 with ``p_goal = T p_now``,
+        ``kind`` ("articulated" or "free-floating") and ``stage`` (its index).
+
+        The only channel through which ground truth leaves the env: the runner hands it to
+        privileged policies (``gt``, ``oracle``) and never to the others.
+        """
+        state = self._stage_state
+        return {"cross_pose": state.gt_cross_pose.copy(), "kind": state.kind,
+                "stage": min(self.stage_index, len(self.STAGES) - 1)}
+
+    @property
+    def observation_fallback(self) -> bool:
+        """True when the camera saw nothing of one object and the clouds were sampled from meshes."""
+        return bool(getattr(self, "_observation_fallback", False))
+
+    def advance_physics(self) -> None:
+        """One physics step of the executor's loop (the furniture held, success checked, hook called)."""
+        self._physics_step()
+
     # ------------------------------------------------------------------ observation
     def get_obs(self, info: dict | None = None, unflattened: bool = False):
         if getattr(self, "_obs_cache", None) is None:
@@ -331,12 +375,7 @@ class CrossPoseEnv(BaseEnv):
             self._observation_fallback = False
         action = fixed_size(action, self.num_action_points, rng)
         anchor = fixed_size(anchor, self.num_anchor_points, rng)
-        return {
-            "action_points": torch.from_numpy(action)[None],
-            "anchor_points": torch.from_numpy(anchor)[None],
-            "kind": torch.tensor([KIND_CODE[self.stage_kind]], dtype=torch.int64),
-            "stage": torch.tensor([min(self.stage_index, len(self.STAGES) - 1)], dtype=torch.int64),
-        }
+        return {"action_points": torch.from_numpy(action)[None], "anchor_points": torch.from_numpy(anchor)[None]}
 
     def _camera_clouds(self) -> tuple[np.ndarray, np.ndarray]:
         self.scene.update_render()
@@ -433,7 +472,7 @@ class CrossPoseEnv(BaseEnv):
             "at_rest": bool(result.at_rest),
             "failure_reason": "" if success else (result.reason or "goal not reached"),
             "sim_seconds": result.sim_seconds,
-            "observation_fallback": bool(getattr(self, "_observation_fallback", False)),
+            "observation_fallback": self.observation_fallback,
             "gt_cross_pose": T_gt.tolist(),
             "pred_cross_pose": T_pred.tolist() if np.all(np.isfinite(T_pred)) else None,
         }
@@ -449,18 +488,19 @@ class CrossPoseEnv(BaseEnv):
 
     # ------------------------------------------------------------------ success
     def _open_distance(self, q_start: float) -> float:
-        """|q_open - q_final| / |q_open - q_start| (DESIGN.md)."""
+        """|q_open - q_final| / |q_open - q_start| (docs/design.md)."""
         span = abs(self.asset.open_qpos - q_start)
         return abs(self.asset.open_qpos - self.furniture.qpos) / max(span, 1e-9)
 
     def door_open(self, q_start: float) -> bool:
-        return self._open_distance(q_start) < OPEN_TOLERANCE and abs(self.furniture.qvel) < 0.05
+        return self._open_distance(q_start) < OPEN_TOLERANCE and abs(self.furniture.qvel) < AT_REST_JOINT_SPEED
 
     def free_object_inside(self) -> bool:
         center, rotation, half = self.furniture.in_region_world(self.root_pose)
         centroid = transform_points(pose_to_matrix(self.free_body.entity_pose), self.free_mesh.center_mass[None])[0]
         local = rotation.T @ (centroid - center)
-        at_rest = np.linalg.norm(self.free_body.linear_velocity) < 0.05 and np.linalg.norm(self.free_body.angular_velocity) < 0.5
+        at_rest = (np.linalg.norm(self.free_body.linear_velocity) < AT_REST_LINEAR_SPEED
+                   and np.linalg.norm(self.free_body.angular_velocity) < AT_REST_ANGULAR_SPEED)
         return bool(np.all(np.abs(local) <= half) and at_rest)
 
     def _stage_success(self, state: StageState) -> bool:

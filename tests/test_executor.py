@@ -9,6 +9,7 @@ import pytest
 
 from wpbench import tasks  # noqa: F401
 from wpbench.sim.executor import best_joint_value
+from wpbench.sim.observation import sample_mesh_surface
 
 
 @pytest.fixture(scope="module")
@@ -33,7 +34,8 @@ def test_best_joint_value_recovers_the_joint(door_env, fraction):
     q_goal = base.joint_fraction(fraction)
     now = f.target_link_pose()
     goal = f.target_link_pose_at(np.array([q_goal]))[0]
-    q = best_joint_value(f, goal @ np.linalg.inv(now), base._stage_state.action_surface)
+    surface = sample_mesh_surface(f.world_mesh([f.target_link]), 512, np.random.default_rng(0))
+    q = best_joint_value(f, goal @ np.linalg.inv(now), surface)
     assert abs(q - q_goal) < 1e-3
 
 
@@ -80,6 +82,6 @@ def test_runaway_simulation_is_a_failure_not_a_crash(place_env):
     base.free_body.set_linear_velocity(np.array([0.0, 0.0, 100.0]))
     from wpbench.sim.executor import simulate_until_still
 
-    result = simulate_until_still(base._physics_step, 1 / 200, lambda: [np.asarray(base.free_body.linear_velocity)],
+    result = simulate_until_still(base.advance_physics, 1 / 200, lambda: [np.asarray(base.free_body.linear_velocity)],
                                   lambda: False, max_seconds=0.2)
     assert not result.ok and "blow-up" in result.reason

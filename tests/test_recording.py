@@ -98,11 +98,6 @@ class FakeObjectSpec:
     rgba: tuple = (0.9, 0.2, 0.1, 1.0)
 
 
-@dataclass
-class FakeStage:
-    gt_cross_pose: np.ndarray
-
-
 class FakeBody:
     def __init__(self):
         self.entity_pose = sapien.Pose([1.0, 0.0, 0.05])
@@ -126,10 +121,13 @@ class FakeEnv:
         self.physics_steps = 0
         shift = np.eye(4)
         shift[:3, 3] = [0.0, 0.2, 0.0]
-        self._stage_state = FakeStage(shift)
+        self.truth = shift
+
+    def ground_truth(self) -> dict:
+        return {"cross_pose": self.truth, "kind": self.stage_kind, "stage": self.stage_index}
 
     def run_physics(self, steps: int) -> None:
-        """What CrossPoseEnv._physics_step does around the hook; the door opens and the block falls."""
+        """What CrossPoseEnv.advance_physics does around the hook; the door opens and the block falls."""
         for _ in range(steps):
             self.furniture.swing(self.furniture.qpos + 0.01)
             p = self.free_body.entity_pose.p
@@ -141,7 +139,7 @@ class FakeEnv:
 
 def fake_obs(rng: np.random.Generator, na: int = 32, nb: int = 64) -> dict:
     return {"action_points": rng.normal(size=(na, 3)).astype(np.float32),
-            "anchor_points": rng.normal(size=(nb, 3)).astype(np.float32), "kind": 0, "stage": 0}
+            "anchor_points": rng.normal(size=(nb, 3)).astype(np.float32)}
 
 
 def stage_result(success: bool = True) -> dict:

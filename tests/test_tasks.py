@@ -10,9 +10,9 @@ import pytest
 import torch
 
 from wpbench import tasks
-from wpbench.tasks.base import ARTICULATED, FREE
+from wpbench.names import ARTICULATED, FREE, TASKS
 
-TASK_IDS = list(tasks.TASKS.values())
+TASK_IDS = [info.env_id for info in TASKS.values()]
 
 
 def _make(task_id, obs_mode="mesh", **kw):
@@ -24,7 +24,7 @@ def _run(env, seed, policy):
     base = env.unwrapped
     results = []
     for _ in base.STAGES:
-        T = base._stage_state.gt_cross_pose if policy == "gt" else np.eye(4)
+        T = base.ground_truth()["cross_pose"] if policy == "gt" else np.eye(4)
         obs, reward, terminated, truncated, info = env.step(T)
         results.append(info["stage_result"])
     return bool(info["success"][0]), results
@@ -47,13 +47,13 @@ def test_reset_is_deterministic(task_id):
     try:
         a, _ = env.reset(seed=11)
         ida = env.unwrapped.asset.object_id
-        gta = env.unwrapped._stage_state.gt_cross_pose.copy()
+        gta = env.unwrapped.ground_truth()["cross_pose"].copy()
         env.reset(seed=12)
         b, _ = env.reset(seed=11)
         assert env.unwrapped.asset.object_id == ida
         np.testing.assert_array_equal(a["action_points"].numpy(), b["action_points"].numpy())
         np.testing.assert_array_equal(a["anchor_points"].numpy(), b["anchor_points"].numpy())
-        np.testing.assert_allclose(env.unwrapped._stage_state.gt_cross_pose, gta, atol=1e-9)
+        np.testing.assert_allclose(env.unwrapped.ground_truth()["cross_pose"], gta, atol=1e-9)
     finally:
         env.close()
 
@@ -77,11 +77,12 @@ def test_open_then_place_has_two_stages_with_kinds():
     env = _make("wpbench/OpenThenPlace-v0")
     try:
         obs, _ = env.reset(seed=5)
-        assert int(obs["kind"][0]) == 0 and int(obs["stage"][0]) == 0
-        obs, _, terminated, _, info = env.step(env.unwrapped._stage_state.gt_cross_pose)
+        assert set(obs) == {"action_points", "anchor_points"}  # the kind of goal is not observed
+        assert env.unwrapped.ground_truth()["kind"] == ARTICULATED and env.unwrapped.ground_truth()["stage"] == 0
+        obs, _, terminated, _, info = env.step(env.unwrapped.ground_truth()["cross_pose"])
         assert not bool(terminated[0]) and info["stage_result"]["kind"] == ARTICULATED
-        assert int(obs["kind"][0]) == 1 and int(obs["stage"][0]) == 1
-        obs, _, terminated, _, info = env.step(env.unwrapped._stage_state.gt_cross_pose)
+        assert env.unwrapped.ground_truth()["kind"] == FREE and env.unwrapped.ground_truth()["stage"] == 1
+        obs, _, terminated, _, info = env.step(env.unwrapped.ground_truth()["cross_pose"])
         assert bool(terminated[0]) and info["stage_result"]["kind"] == FREE
         with pytest.raises(RuntimeError, match="reset"):
             env.step(np.eye(4))
@@ -109,7 +110,7 @@ def test_camera_observation_sees_the_door_and_furniture():
     try:
         obs, _ = env.reset(seed=4)
         base = env.unwrapped
-        assert not base._observation_fallback
+        assert not base.observation_fallback
         door = base.furniture.world_mesh([base.furniture.target_link])
         _, dist, _ = door.nearest.on_surface(obs["action_points"][0].numpy().astype(np.float64))
         assert np.median(dist) < 5e-3  # depth quantisation and mesh visuals vs collision

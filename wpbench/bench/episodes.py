@@ -14,8 +14,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-TASKS = ("open-door", "place-in", "open-then-place")
-OBS = ("camera", "mesh")
+from wpbench.names import BUILTIN_TASKS as TASKS
+from wpbench.names import OBS_MODES as OBS
 
 _CHILD = r"""
 import json, resource, sys, time

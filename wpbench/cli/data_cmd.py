@@ -6,21 +6,20 @@ from pathlib import Path
 
 import typer
 
+from wpbench import names
 from wpbench.cli.choices import check_choice
 
 app = typer.Typer(help="Generate training data from the simulator.", add_completion=False, no_args_is_help=True)
-
-KIND_NAMES = ("articulated", "free-floating")
 
 
 @app.command()
 def generate(
     out: Path = typer.Option(Path("data"), help="Root folder; samples go to OUT/<split>/."),
     samples_per_kind: int = typer.Option(1500, min=1, help="Samples of each kind (rounded up to whole shards)."),
-    split: str = typer.Option("train", help="Furniture split: train or val (disjoint instances)."),
+    split: str = typer.Option("train", help=f"Furniture split: {', '.join(names.SPLITS)} (disjoint instances)."),
     obs: str = typer.Option("camera", help="Observation: camera (depth + segmentation) or mesh (surface samples)."),
     seed: int = typer.Option(0, help="Base seed; every sample's episode seed is derived from it."),
-    kind: list[str] = typer.Option(None, help="Only this kind (repeatable): articulated, free-floating [default: both]."),
+    kind: list[str] = typer.Option(None, help=f"Only this kind (repeatable): {', '.join(names.KINDS)} [default: all]."),
     shard_size: int = typer.Option(50, min=1, help="Samples per shard file (lowered to fit small runs)."),
     scene_reuse: int = typer.Option(5, min=1, help="Consecutive samples sharing one loaded furniture instance."),
     wide_start_probability: float = typer.Option(
@@ -39,11 +38,11 @@ def generate(
     from wpbench.data.config import GenerationConfig
     from wpbench.data.generate import generate as run_generation
 
-    check_choice("split", split, ("train", "val"))
-    check_choice("observation mode", obs, ("camera", "mesh"))
-    kinds = tuple(kind) if kind else KIND_NAMES
+    check_choice("split", split, names.SPLITS)
+    check_choice("observation mode", obs, names.OBS_MODES)
+    kinds = tuple(kind) if kind else names.KINDS
     for k in kinds:
-        check_choice("kind", k, KIND_NAMES)
+        check_choice("kind", k, names.KINDS)
     scene_reuse = min(scene_reuse, samples_per_kind)
     if samples_per_kind < shard_size:
         shard_size = samples_per_kind

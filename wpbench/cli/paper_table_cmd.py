@@ -23,7 +23,9 @@ def paper_table(
     from wpbench.cli.choices import check_choice
     from wpbench.evaluation.paper_table import PaperTableConfig, make_paper_table
 
-    check_choice("observation mode", obs, ("camera", "mesh"))
+    from wpbench.names import OBS_MODES
+
+    check_choice("observation mode", obs, OBS_MODES)
     if not (data / "train").is_dir() or not (data / "val").is_dir():
         raise typer.BadParameter(f"{data} lacks train/ and val/; make them with `wpbench data generate --out {data}`")
     ensemble = {key: value for key, value in (("subsets", subsets), ("mirror_views", mirror_views)) if value is not None}

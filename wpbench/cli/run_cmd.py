@@ -6,20 +6,8 @@ from pathlib import Path
 
 import typer
 
+from wpbench import names
 from wpbench.cli.choices import check_choice
-
-TASK_NAMES = ("open-door", "place-in", "open-then-place")
-SPLITS = ("train", "val", "all")
-OBS_MODES = ("camera", "mesh")
-
-
-def _learned_policies() -> tuple[str, ...]:
-    """Policies that load trained weights (and so take --weights-root): the trainable ones,
-    ``wp`` (the best variant) and ``oracle`` (gf or tp by the true kind)."""
-    from wpbench.training.specs import POLICY_SPECS
-
-    return (*POLICY_SPECS, "wp", "oracle")
-
 
 def _policy_names() -> list[str]:
     from wpbench.policies.registry import available_policies
@@ -29,8 +17,9 @@ def _policy_names() -> list[str]:
 
 def run(
     policy: str = typer.Option("wp", help="Policy name (see `wpbench run --policy list`)."),
-    task: str = typer.Option("open-then-place", help=f"One of: {', '.join(TASK_NAMES)}."),
-    split: str = typer.Option("val", help="Furniture split: train, val, or all."),
+    task: str = typer.Option("open-then-place", help=f"One of: {', '.join(names.BUILTIN_TASKS)}, or a task of "
+                                                       f"your own registered through ${names.PLUGINS_VARIABLE}."),
+    split: str = typer.Option("val", help=f"Furniture split: {', '.join(names.RUN_SPLITS)}."),
     episodes: int = typer.Option(50, min=1, help="Number of episodes."),
     seed: int = typer.Option(0, help="Run seed; episode i uses a seed derived from (seed, i)."),
     assets: str = typer.Option("procedural", help="'procedural' (built-in furniture) or a PartNet-Mobility folder."),
@@ -56,13 +45,18 @@ def run(
         typer.echo("\n".join(_policy_names()))
         raise typer.Exit(0)
     check_choice("policy", policy, _policy_names())
-    check_choice("task", task, TASK_NAMES)
-    check_choice("split", split, SPLITS)
-    check_choice("observation mode", obs, OBS_MODES)
+    try:
+        task_names = names.task_names()
+    except ValueError as err:
+        typer.echo(f"Error: {err}", err=True)
+        raise typer.Exit(2)
+    check_choice("task", task, task_names)
+    check_choice("split", split, names.RUN_SPLITS)
+    check_choice("observation mode", obs, names.OBS_MODES)
     if assets != "procedural" and not Path(assets).is_dir():
         raise typer.BadParameter(f"--assets must be 'procedural' or an existing folder; {assets!r} is neither")
     policy_kwargs = {}
-    learned = _learned_policies()
+    learned = names.WEIGHTED_POLICIES
     for flag, value in (("--weights-root", weights_root), ("--subsets", subsets), ("--[no-]mirror-views", mirror_views)):
         if value is not None and policy not in learned:
             raise typer.BadParameter(f"{flag} applies to the trained policies ({', '.join(learned)}); "

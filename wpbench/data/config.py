@@ -1,7 +1,7 @@
 """What ``wpbench data generate`` samples, as one typed config.
 
-Kinds map to tasks: ``articulated`` samples come from ``wpbench/OpenDoor-v0``,
-``free-floating`` ones from ``wpbench/PlaceIn-v0``; each split (train / val)
+Kinds map to tasks (``wpbench.names.KIND_TASK``): ``articulated`` samples come from
+``open-door``, ``free-floating`` ones from ``place-in``; each split (train / val)
 uses only that split's furniture instances, so validation furniture is never
 seen in training.
 """
@@ -12,12 +12,7 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass, field
 
-ARTICULATED, FREE = "articulated", "free-floating"
-KINDS = (ARTICULATED, FREE)
-KIND_TASK = {ARTICULATED: "wpbench/OpenDoor-v0", FREE: "wpbench/PlaceIn-v0"}
-KIND_CODE = {ARTICULATED: 0, FREE: 1}
-SPLITS = ("train", "val")
-OBS_MODES = ("camera", "mesh")
+from wpbench.names import ARTICULATED, FREE, KIND_CODE, KIND_TASK, KINDS, OBS_MODES, SPLITS
 
 
 @dataclass(frozen=True)

@@ -53,8 +53,9 @@ def make_env(config: GenerationConfig, kind: str):
     """The task env for ``kind``; scenes are reloaded only when we ask (reconfiguration_freq=0)."""
     import gymnasium as gym
 
-    from wpbench import tasks  # noqa: F401  (registers the wpbench envs)
+    from wpbench.names import import_task
 
+    env_id = import_task(KIND_TASK[kind]).env_id  # registers the task's env
     kwargs = dict(
         obs_mode=config.obs, assets=config.assets, split=config.split,
         num_action_points=config.num_action_points, num_anchor_points=config.num_anchor_points,
@@ -64,7 +65,7 @@ def make_env(config: GenerationConfig, kind: str):
         kwargs["objects"] = tuple(config.objects)
     if config.extra_train_instances and config.split == "train":
         kwargs["extra_train_instances"] = config.extra_train_instances
-    return gym.make(KIND_TASK[kind], **kwargs)
+    return gym.make(env_id, **kwargs)
 
 
 def symmetric_min_rotation(T: np.ndarray, object_pose: np.ndarray, discrete: np.ndarray) -> np.ndarray:
@@ -87,23 +88,17 @@ def draw_sample(env, config: GenerationConfig, kind: str, index: int) -> dict:
     seed = sample_seed(config, kind, index)
     base = env.unwrapped
     reconfigure = index % config.scene_reuse == 0
-    if reconfigure:
-        # The task draws the furniture from an rng counter that otherwise carries over
-        # from earlier episodes; restarting it makes the scene a function of the seed only.
-        base._rng_counter = -1
-    obs, _ = env.reset(seed=seed, options={"reconfigure": reconfigure})
-    start_fraction = float("nan")
+    options = {"reconfigure": reconfigure, "restart_rng": reconfigure}
     if kind == ARTICULATED:
         rng = np.random.default_rng([seed, 17])
         if rng.random() < config.wide_start_probability:
-            fraction = float(rng.uniform(*config.wide_start_fraction))
-            base.furniture.set_target_qpos(base.joint_fraction(fraction))
-            base._stage_state = base._make_stage_state()
-            base._obs_cache = None
-            obs = base.get_obs()
+            options["start_fraction"] = float(rng.uniform(*config.wide_start_fraction))
+    obs, _ = env.reset(seed=seed, options=options)
+    start_fraction = float("nan")
+    if kind == ARTICULATED:
         a = base.asset
         start_fraction = (base.furniture.qpos - a.closed_qpos) / (a.open_qpos - a.closed_qpos)
-    T_raw = np.asarray(base._stage_state.gt_cross_pose, dtype=np.float64)
+    T_raw = np.asarray(base.ground_truth()["cross_pose"], dtype=np.float64)
     T = T_raw
     free_object = ""
     if kind == FREE:
@@ -127,7 +122,7 @@ def draw_sample(env, config: GenerationConfig, kind: str, index: int) -> dict:
         "free_object": free_object,
         "seed": seed,
         "start_fraction": start_fraction,
-        "camera_fallback": bool(getattr(base, "_observation_fallback", False)),
+        "camera_fallback": base.observation_fallback,
     }
 
 

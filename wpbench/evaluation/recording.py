@@ -154,7 +154,7 @@ class RerunRecorder:
                          rr.Points3D(action, colors=cfg.action_color, radii=cfg.point_radius))
         self._stream.log("world/observation/anchor",
                          rr.Points3D(anchor, colors=cfg.anchor_color, radii=cfg.point_radius))
-        truth = np.asarray(env._stage_state.gt_cross_pose, dtype=np.float64)
+        truth = np.asarray(env.ground_truth()["cross_pose"], dtype=np.float64)
         self._stream.log("world/truth/goal",
                          rr.Points3D(_apply(truth, action), colors=cfg.truth_color, radii=cfg.point_radius))
         predicted = _array(transform)

@@ -21,6 +21,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+OBSERVATION_KEYS = ("action_points", "anchor_points")
 ERROR_FIELDS = ("rot_err_deg", "trans_err_m", "trans_err_raw_m", "point_err_m", "point_mse")
 KIND_PREFIX = {"articulated": "articulated", "free-floating": "free"}
 
@@ -55,14 +56,13 @@ def make_env(cfg: RunConfig):
     """The task's gymnasium env for this run (ManiSkill3 BaseEnv on the CPU)."""
     import gymnasium as gym
 
-    from wpbench import tasks  # registers wpbench/* envs
+    from wpbench.names import import_task
 
-    if cfg.task not in tasks.TASKS:
-        raise ValueError(f"unknown task {cfg.task!r}; valid: {', '.join(tasks.TASKS)}")
+    info = import_task(cfg.task)  # registers the task's env with gymnasium
     # Real PartNet-Mobility folders have no split: every object is unseen furniture.
     split = None if cfg.assets != "procedural" or cfg.split in ("all", None) else cfg.split
     return gym.make(
-        tasks.TASKS[cfg.task],
+        info.env_id,
         obs_mode=cfg.obs,
         assets=cfg.assets,
         split=split,
@@ -71,14 +71,16 @@ def make_env(cfg: RunConfig):
     )
 
 
-def to_numpy_obs(obs: dict) -> dict[str, Any]:
-    """Batched torch observation of a ManiSkill env -> the unbatched numpy dict policies take."""
-    return {
-        "action_points": obs["action_points"][0].cpu().numpy(),
-        "anchor_points": obs["anchor_points"][0].cpu().numpy(),
-        "kind": int(obs["kind"][0]),
-        "stage": int(obs["stage"][0]),
-    }
+def policy_inputs(policy, obs: dict, ground_truth) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """What ``policy.predict`` is given: (observation, info).
+
+    Every policy gets the segmented clouds of the batched torch observation ``obs`` as
+    unbatched numpy arrays, ``{"action_points": (NA, 3), "anchor_points": (NB, 3)}``, and
+    nothing else. Only a privileged policy (``uses_ground_truth``) also gets ``info``, the
+    env's ``ground_truth()``; ``ground_truth`` is that method, called only for them.
+    """
+    observation = {key: obs[key][0].cpu().numpy() for key in OBSERVATION_KEYS}
+    return observation, (ground_truth() if policy.uses_ground_truth else None)
 
 
 def run_episode(env, policy, seed: int, observer=None) -> dict[str, Any]:
@@ -91,11 +93,10 @@ def run_episode(env, policy, seed: int, observer=None) -> dict[str, Any]:
     if observer is not None:
         observer.begin_episode(base, seed)
     for _ in range(len(base.STAGES)):
-        np_obs = to_numpy_obs(obs)
-        gt_info = {"gt_cross_pose": base._stage_state.gt_cross_pose, "kind": base.stage_kind}
+        np_obs, info = policy_inputs(policy, obs, base.ground_truth)
         t1 = time.perf_counter()
         try:
-            out = policy.predict(np_obs, gt_info if policy.uses_ground_truth else None)
+            out = policy.predict(np_obs, info)
             transform, diagnostics, error = out.transform, out.diagnostics, ""
         except ValueError as err:  # a policy that cannot answer fails the stage, the run goes on
             transform, diagnostics, error = np.full((4, 4), np.nan), {}, f"policy error: {err}"
