@@ -11,7 +11,7 @@ cross-pose with the scripted executor (``env.step(T)``) and scores it.
 Observation (``obs_mode``):
     ``"camera"`` (default): point clouds from a SAPIEN depth + segmentation camera
     at a random viewpoint in front of the furniture; ``"mesh"``: surface samples of
-    the collision geometry (no renderer needed).
+    the collision geometry that are visible from that same viewpoint (no renderer needed).
     ``obs = {"action_points": (1, NA, 3), "anchor_points": (1, NB, 3)}`` (batched torch,
     as every ManiSkill env; wrap with ``CPUGymWrapper`` for numpy): the segmented clouds,
     what a robot's camera and segmenter would give. Nothing in it says which kind of goal
@@ -45,6 +45,7 @@ from wpbench.sim.free_object import build_free_object, raw_body
 from wpbench.sim.furniture import SceneFurniture
 from wpbench.sim.observation import camera_points_by_segment, fixed_size, sample_mesh_surface
 from wpbench.names import ARTICULATED, FREE, OBS_MODES
+from wpbench.sim.visibility import look_at_frame, visible_mask
 from wpbench.sim.poses import matrix_to_pose, pose_to_matrix, project_to_rigid, transform_points, yaw_matrix
 
 SIM_FREQ = 200
@@ -54,6 +55,9 @@ AT_REST_JOINT_SPEED = 0.05        # rad/s or m/s: a joint slower than this is at
 AT_REST_LINEAR_SPEED = 0.05       # m/s: a free object slower than this (and ...)
 AT_REST_ANGULAR_SPEED = 0.5       # rad/s: ... turning slower than this is at rest
 CAMERA_FOV = 1.0           # rad, vertical
+MESH_SAMPLES_PER_POINT = 4   # camera fallback: surface samples per observed point, before farthest-point sampling
+VIEW_SAMPLES_PER_M2 = 20000  # mesh mode: surface samples per m^2 tested for visibility (a few per z-buffer pixel)
+VIEW_RESOLUTION = 128        # mesh mode: z-buffer pixels per side
 SUCCESS_CHECK_STRIDE = 10  # physics steps between checks of the success condition while simulating
 
 
@@ -133,7 +137,7 @@ class CrossPoseEnv(BaseEnv):
     def _default_sensor_configs(self):
         if self.observation_source != "camera":
             return []
-        # The pose is replaced in every episode by a random viewpoint (_place_camera).
+        # The pose is replaced in every episode by a random viewpoint (_draw_viewpoint).
         pose = sapien.Pose(p=[2.0, 0.0, 1.0])
         r = self.camera_resolution
         return [CameraConfig("view", pose=pose, width=r, height=r, fov=CAMERA_FOV, near=0.05, far=20.0, shader_pack="default")]
@@ -232,8 +236,11 @@ class CrossPoseEnv(BaseEnv):
         self.stage_results: list[dict] = []
         self.physics_steps = 0
         self._initialize_task(rng, options)
+        # Both observation modes look from this viewpoint: the camera renders from it, the
+        # mesh mode keeps the surface samples visible from it.
+        self.view_eye, self.view_target = self._draw_viewpoint(rng)
         if self.observation_source == "camera":
-            self._place_camera(rng)
+            self._sensors["view"].camera.set_local_pose(_look_at(self.view_eye, self.view_target))
         fraction = options.get("start_fraction")
         if fraction is not None:
             if self.stage_kind != ARTICULATED:
@@ -276,8 +283,9 @@ class CrossPoseEnv(BaseEnv):
         self.free_body.set_linear_velocity(np.zeros(3))
         self.free_body.set_angular_velocity(np.zeros(3))
 
-    def _place_camera(self, rng: np.random.Generator) -> None:
-        """A random viewpoint in front of the furniture that sees the furniture (and the free object)."""
+    def _draw_viewpoint(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """(eye, target): a random viewpoint in front of the furniture that sees the furniture
+        (and the free object)."""
         lo, hi = self.furniture.world_bounds()
         pts = [lo, hi]
         if self.free_body is not None and np.linalg.norm(self.free_body.entity_pose.p[:2]) < 20:
@@ -291,8 +299,7 @@ class CrossPoseEnv(BaseEnv):
         elevation = rng.uniform(np.radians(15), np.radians(40))
         distance = radius / np.sin(CAMERA_FOV / 2) * rng.uniform(1.0, 1.25)
         direction = np.array([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
-        eye = target + distance * direction
-        self._sensors["view"].camera.set_local_pose(_look_at(eye, target))
+        return target + distance * direction, target
 
     # ------------------------------------------------------------------ stages
     @property
@@ -303,7 +310,7 @@ class CrossPoseEnv(BaseEnv):
         if kind == ARTICULATED:
             mesh = self.furniture.world_mesh([self.furniture.target_link])
         else:
-            mesh = self.free_mesh.copy().apply_transform(pose_to_matrix(self.free_body.entity_pose))
+            mesh = self._free_object_mesh()
         return sample_mesh_surface(mesh, METRIC_POINTS, rng)
 
     def _make_stage_state(self) -> StageState:
@@ -368,9 +375,10 @@ class CrossPoseEnv(BaseEnv):
         if self.observation_source == "camera":
             action, anchor = self._camera_clouds()
         if action is None or len(action) == 0 or len(anchor) == 0:
-            # Mesh mode, or a camera that saw nothing of one object (recorded in stage info).
+            # Mesh mode, or a camera that saw nothing of one object (recorded in stage info):
+            # then every surface sample, since the camera's view showed nothing to keep.
             self._observation_fallback = self.observation_source == "camera"
-            action, anchor = self._mesh_clouds(rng)
+            action, anchor = self._mesh_clouds(rng, from_viewpoint=not self._observation_fallback)
         else:
             self._observation_fallback = False
         action = fixed_size(action, self.num_action_points, rng)
@@ -387,16 +395,30 @@ class CrossPoseEnv(BaseEnv):
         action_ids, anchor_ids = self._segment_ids()
         return points[np.isin(ids, list(action_ids))], points[np.isin(ids, list(anchor_ids))]
 
-    def _mesh_clouds(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        dense = 4
+    def _mesh_clouds(self, rng: np.random.Generator, from_viewpoint: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Surface samples of the action and anchor objects; with ``from_viewpoint``, only those
+        a camera at the episode's viewpoint would see (the rest of the scene hides them too)."""
         if self.stage_kind == ARTICULATED:
             action_mesh = self.furniture.world_mesh([self.furniture.target_link])
             anchor_mesh = self.furniture.world_mesh(self.furniture.anchor_links())
+            others = [self._free_object_mesh()] if self.free_body is not None else []
         else:
-            action_mesh = self.free_mesh.copy().apply_transform(pose_to_matrix(self.free_body.entity_pose))
+            action_mesh = self._free_object_mesh()
             anchor_mesh = self.furniture.world_mesh(self.furniture.links)
-        return (sample_mesh_surface(action_mesh, dense * self.num_action_points, rng),
-                sample_mesh_surface(anchor_mesh, dense * self.num_anchor_points, rng))
+            others = []
+        if not from_viewpoint:
+            return (sample_mesh_surface(action_mesh, MESH_SAMPLES_PER_POINT * self.num_action_points, rng),
+                    sample_mesh_surface(anchor_mesh, MESH_SAMPLES_PER_POINT * self.num_anchor_points, rng))
+        meshes = [action_mesh, anchor_mesh, *others]
+        clouds = [sample_mesh_surface(m, max(1, int(VIEW_SAMPLES_PER_M2 * m.area)), rng) for m in meshes]
+        seen = visible_mask(np.concatenate(clouds), self.view_eye, self.view_target, CAMERA_FOV, VIEW_RESOLUTION)
+        seen = np.split(seen, np.cumsum([len(c) for c in clouds])[:-1])
+        action, anchor = clouds[0][seen[0]], clouds[1][seen[1]]
+        # An object the viewpoint cannot see at all still gets a cloud, as a camera fallback does.
+        return (action if len(action) else clouds[0]), (anchor if len(anchor) else clouds[1])
+
+    def _free_object_mesh(self):
+        return self.free_mesh.copy().apply_transform(pose_to_matrix(self.free_body.entity_pose))
 
     # ------------------------------------------------------------------ step
     def step(self, action):
@@ -521,14 +543,7 @@ class CrossPoseEnv(BaseEnv):
 
 def _look_at(eye: np.ndarray, target: np.ndarray) -> sapien.Pose:
     """SAPIEN camera pose (x forward, y left, z up) at ``eye`` looking at ``target``."""
-    forward = target - eye
-    forward /= np.linalg.norm(forward)
-    left = np.cross([0.0, 0.0, 1.0], forward)
-    if np.linalg.norm(left) < 1e-6:
-        left = np.array([0.0, 1.0, 0.0])
-    left /= np.linalg.norm(left)
-    up = np.cross(forward, left)
     T = np.eye(4)
-    T[:3, :3] = np.stack([forward, left, up], axis=1)
+    T[:3, :3] = look_at_frame(eye, target)
     T[:3, 3] = eye
     return matrix_to_pose(T)
