@@ -3,14 +3,16 @@
 ``gf`` (Goal Flow), ``tp`` (TAX-Pose), ``wp-og`` / ``wp-postsvd`` / ``wp-postsvd-t``
 (WeightedPose variants) are all a :class:`LearnedPolicy` with a different
 ``policy`` name; ``wp`` is the variant named in ``policies/weights/best.json``.
-Weights come from ``wpbench train --policy NAME`` (``model.pt`` + ``config.json``).
+Weights come from ``wpbench train --policy NAME`` and ``wpbench train --promote RUN``
+(``wpbench.weights``: loading, hashing, promotion, best.json).
 
 The model was trained on random subsets of the stored clouds
 (``config.json``: ``num_action_points`` / ``num_anchor_points``), so each
 observation is subsampled the same way (fixed seed: the same observation gives
 the same answer). ``subsets`` such subsets are answered in one batch and fused
-into one pose (``wpbench.models.subset_ensemble``; 1 = a single pass), every second
-one in the scene mirrored in y = 0 (``mirror_views``). The
+into one pose, every second one in the scene mirrored in y = 0 (``mirror_views``):
+``wpbench.models.subset_ensemble.ensemble_predict``, the same function the pose-error
+tables use (1 subset = a single pass). The
 per-point diagnostics are those of the first subset, mapped back to every observed
 point by nearest kept neighbour (their displacement is copied), so a recorder can
 draw them over the full cloud.
@@ -18,19 +20,15 @@ draw them over the full cloud.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
-from wpbench.policies.base import Policy, PolicyConfig, PolicyOutput
 from wpbench.models.configs import DEFAULT_MIRROR_VIEWS, DEFAULT_SUBSETS
-
-WEIGHTS_ROOT = Path(__file__).resolve().parent / "weights"
-BEST_FILE = "best.json"
-FALLBACK_WP = "wp-postsvd-t"
+from wpbench.policies.base import Policy, PolicyConfig, PolicyOutput
+from wpbench.weights import BEST_FILE, best_weighted_pose, weights_root_or_shipped
 # diagnostic -> which cloud it is per-point on, and whether it is a position (expanded as a displacement)
 _PER_POINT = {
     "flow": ("action", False),
@@ -63,7 +61,7 @@ class LearnedPolicyConfig(PolicyConfig):
 
     @property
     def weights_dir(self) -> Path:
-        return Path(self.weights_root or WEIGHTS_ROOT) / self.policy
+        return weights_root_or_shipped(self.weights_root) / self.policy
 
 
 class LearnedPolicy(Policy):
@@ -79,12 +77,9 @@ class LearnedPolicy(Policy):
         elif kwargs:
             raise ValueError("give either a config or keyword arguments, not both")
         self.config = config
-        import torch
-
         from wpbench.models import subset_ensemble
-        from wpbench.training.artifacts import load_trained_model
+        from wpbench.weights import load_trained_model
 
-        self._torch = torch
         self._ensemble = subset_ensemble
         self.model, self.model_config = load_trained_model(config.weights_dir, config.policy)
         self.num_action_points = int(self.model_config["num_action_points"])
@@ -101,30 +96,13 @@ class LearnedPolicy(Policy):
             "data": self.model_config.get("data"),
         }
 
-    def _subsample(self, points: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
-        """Indices of a random subset of n points (all points if there are not more than n)."""
-        if len(points) <= n:
-            return np.arange(len(points))
-        return np.sort(rng.choice(len(points), size=n, replace=False))
-
     def predict(self, obs: dict[str, Any], info: dict[str, Any] | None = None) -> PolicyOutput:
-        torch = self._torch
         action = _cloud(obs, "action_points")
         anchor = _cloud(obs, "anchor_points")
-        rng = np.random.default_rng(self.config.seed)
-        ensemble = self._ensemble
-        count = ensemble.subsets_worth_drawing(self.config.subsets, (len(action), len(anchor)),
-                                               (self.num_action_points, self.num_anchor_points))
-        picks = [(self._subsample(action, self.num_action_points, rng), self._subsample(anchor, self.num_anchor_points, rng))
-                 for _ in range(count)]
-        views = ensemble.view_transforms(count, self.config.mirror_views and count > 1)
-        with torch.no_grad():
-            out = self.model(ensemble.into_view(torch.from_numpy(np.stack([action[ia] for ia, _ in picks])), views),
-                             ensemble.into_view(torch.from_numpy(np.stack([anchor[ib] for _, ib in picks])), views))
-            transform = ensemble.out_of_view(out.transform.double(), views)
-            if count > 1:  # one subset is the model's answer as it is
-                transform = ensemble.fuse_goal_clouds(torch.from_numpy(action).double()[None], transform[:, None])
-        transform = transform[0].numpy()
+        answer = self._ensemble.ensemble_predict(self.model, action, anchor, self.num_action_points,
+                                                 self.num_anchor_points, self.config.subsets,
+                                                 self.config.mirror_views, self.config.seed)
+        transform, out, picks = answer.transform.numpy(), answer.first, answer.picks
         ia, ib = picks[0]
         clouds = {"action": (action, ia), "anchor": (anchor, ib)}
         diagnostics: dict[str, Any] = {}
@@ -191,24 +169,9 @@ class WeightedPosePostSVDTPolicy(LearnedPolicy):
     default_policy = "wp-postsvd-t"
 
 
-def best_weighted_pose(weights_root: Path | None = None) -> str:
-    """The variant ``best.json`` names, or ``wp-postsvd-t`` when there is no best.json."""
-    path = Path(weights_root or WEIGHTS_ROOT) / BEST_FILE
-    if not path.is_file():
-        return FALLBACK_WP
-    try:
-        name = json.loads(path.read_text())["policy"]
-    except (json.JSONDecodeError, KeyError, TypeError) as err:
-        raise ValueError(f"{path} is corrupt ({err}); rewrite it with `wpbench train --select-best`") from err
-    from wpbench.training.specs import WEIGHTED_POSE_VARIANTS
-
-    if name not in WEIGHTED_POSE_VARIANTS:
-        raise ValueError(f"{path} names {name!r}, not a WeightedPose variant; rewrite it with `wpbench train --select-best`")
-    return name
-
-
 class BestWeightedPosePolicy(LearnedPolicy):
-    """``wp``: the best WeightedPose variant (``best.json``; ``wp-postsvd-t`` if there is none)."""
+    """``wp``: the best WeightedPose variant (``best.json``; ``wpbench.weights.FALLBACK_WEIGHTED_POSE``
+    if there is none)."""
 
     def __init__(self, config: LearnedPolicyConfig | None = None, **kwargs: Any) -> None:
         if config is None and "policy" not in kwargs:
@@ -217,7 +180,8 @@ class BestWeightedPosePolicy(LearnedPolicy):
             try:
                 super().__init__(policy=chosen, **kwargs)
             except FileNotFoundError as err:
-                source = "best.json" if (Path(root or WEIGHTS_ROOT) / BEST_FILE).is_file() else "the fallback (no best.json)"
+                has_best = (weights_root_or_shipped(root) / BEST_FILE).is_file()
+                source = BEST_FILE if has_best else "the fallback (no best.json)"
                 raise FileNotFoundError(
                     f"wp is an alias of {chosen!r} ({source}), whose weights are missing: {err}. "
                     "Train the WeightedPose variants (`wpbench train --policy wp-postsvd-t`, ...), "

@@ -28,8 +28,7 @@ def test_nan_errors_are_not_numbers():
     assert "n/a / n/a / n/a" in render(cfg, errors, {})
 
 
-def test_missing_weights_give_a_table_that_says_so(tmp_path: Path, monkeypatch):
-    monkeypatch.setenv("WPBENCH_WEIGHTS_DIR", str(tmp_path / "no-weights"))
+def test_missing_weights_give_a_table_that_says_so(tmp_path: Path):
     cfg = PaperTableConfig(data=tmp_path, policies=("no-such-policy",), run_missing=False, results=tmp_path)
     out = make_paper_table(cfg)
     assert "no-such-policy | no weights" in out.read_text()

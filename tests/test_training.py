@@ -1,5 +1,5 @@
 """The trainer on a tiny synthetic split with tiny models: logs, checkpoints, final
-files, resume after an interruption, warm starts of WeightedPose, best.json."""
+files, resume after an interruption, warm starts of WeightedPose from runs, the evaluation paths."""
 
 from __future__ import annotations
 
@@ -20,8 +20,10 @@ TINY_TP = {**TINY_GF, "attention_heads": 2}
 
 
 def _config(root, policy, **kw) -> TrainConfig:
+    """A tiny run written to ``root/runs/<policy>``; WeightedPose starts from the gf and tp runs there."""
     overrides = {"gf": TINY_GF, "tp": TINY_TP}.get(policy, {})
-    base = dict(policy=policy, data=root / "data", weights_root=root / "weights", max_steps=2, steps_per_epoch=1,
+    base = dict(policy=policy, data=root / "data", out=root / "runs" / policy, weights_root=root / "runs",
+                max_steps=2, steps_per_epoch=1,
                 batch_size=2, num_action_points=24, num_anchor_points=40, val_per_kind=2, final_val_per_kind=3,
                 model_overrides=overrides)
     base.update(kw)
@@ -139,17 +141,19 @@ def test_weighted_pose_needs_trained_branches_and_says_how_to_make_them(tmp_path
         train(config, echo=lambda _: None)
 
 
-def test_weighted_pose_starts_from_gf_and_tp_and_writes_best_json(data_root):
+def test_weighted_pose_starts_from_the_gf_and_tp_runs_and_leaves_best_json_alone(data_root):
     for policy in ("gf", "tp"):
-        if not (data_root / "weights" / policy / "model.pt").is_file():
+        if not (data_root / "runs" / policy / "model.pt").is_file():
             train(_config(data_root, policy), echo=lambda _: None)
     config = _config(data_root, "wp-postsvd-t", max_steps=1)
     metrics = train(config, echo=lambda _: None)
     assert set(metrics["val"]) == {"articulated", "free-floating"}
     described = json.loads((config.out / "config.json").read_text())
     assert set(described["init"]["from"]) == {"gf", "tp"}
-    best = json.loads((data_root / "weights" / "best.json").read_text())
-    assert best["policy"] == "wp-postsvd-t" and "wp-postsvd-t" in best["candidates"]
+    for name in ("gf", "tp"):  # it records which weights it started from
+        started = json.loads((data_root / "runs" / name / "config.json").read_text())
+        assert described["init"]["from"][name]["model_hash"] == started["model_hash"]
+    assert not (data_root / "runs" / "best.json").exists()  # choosing `wp` is the promotion's job
 
 
 def test_errors_by_category_partition_the_samples(tmp_path):
@@ -174,6 +178,7 @@ def test_errors_by_category_partition_the_samples(tmp_path):
 
 
 def test_evaluation_with_subsets_fuses_them_and_skips_them_when_the_clouds_are_not_subsampled(tmp_path):
+    """``subsets=None`` is training's one-subset validation; ``subsets=K`` answers as the policy does."""
     import torch
 
     from wpbench.data.dataset import CrossPoseDataset

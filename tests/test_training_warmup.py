@@ -56,8 +56,8 @@ def _states(data_root, policy, warmup):  # noqa: F811
     _train_baselines_once(data_root)
     config = _config(data_root, policy, mixing_warmup=warmup, out=data_root / f"{policy}-{warmup}")
     train(config, echo=lambda _: None)
-    gf = torch.load(data_root / "weights" / "gf" / "model.pt", weights_only=True)
-    tp = torch.load(data_root / "weights" / "tp" / "model.pt", weights_only=True)
+    gf = torch.load(data_root / "runs" / "gf" / "model.pt", weights_only=True)
+    tp = torch.load(data_root / "runs" / "tp" / "model.pt", weights_only=True)
     after = torch.load(config.out / "model.pt", weights_only=True)
     return config, gf, tp, after
 
@@ -92,7 +92,7 @@ def _step_budget_run(data_root, out, echo=lambda _: None, **kw):  # noqa: F811
 
 def _train_baselines_once(data_root):  # noqa: F811
     for baseline in ("gf", "tp"):
-        if not (data_root / "weights" / baseline / "model.pt").is_file():
+        if not (data_root / "runs" / baseline / "model.pt").is_file():
             train(_config(data_root, baseline), echo=lambda _: None)
 
 

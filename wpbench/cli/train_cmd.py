@@ -1,4 +1,5 @@
-"""``wpbench train --policy NAME``: train a learned policy (see ``wpbench.training``)."""
+"""``wpbench train --policy NAME``: train a learned policy into a run folder (see ``wpbench.training``);
+``wpbench train --promote RUN``: ship a finished run as the policy's weights (see ``wpbench.weights``)."""
 
 from __future__ import annotations
 
@@ -7,16 +8,17 @@ from pathlib import Path
 import typer
 
 from wpbench.cli.choices import check_choice
-
-POLICY_NAMES = ("gf", "tp", "wp-og", "wp-postsvd", "wp-postsvd-t")
+from wpbench.names import TRAINABLE_POLICIES as POLICY_NAMES
 
 
 def train(
     policy: str = typer.Option(None, help=f"Policy to train: {', '.join(POLICY_NAMES)}."),
     data: Path = typer.Option(Path("data"), help="Data root with train/ and val/ (from `wpbench data generate`)."),
     minutes: float = typer.Option(20.0, min=0.01, help="Training wall-time budget in minutes (summed over resumes)."),
-    out: Path = typer.Option(None, help="Output folder [default: WEIGHTS_ROOT/<policy>]."),
-    weights_root: Path = typer.Option(None, help="Where trained policies live, warm starts and best.json [default: policies/weights]."),
+    out: Path = typer.Option(None, help="Run folder to write (and resume from) [default: runs/train/<policy>]."),
+    weights_root: Path = typer.Option(None, help="Folder of trained policies: WeightedPose starts from its gf/ and tp/ "
+                                                 "(runs/train to start from your own runs); --promote and "
+                                                 "--select-best write into it [default: policies/weights]."),
     batch_size: int = typer.Option(8, min=1, help="Samples per optimiser step."),
     steps_per_epoch: int = typer.Option(40, min=1, help="Optimiser steps between validation + checkpoint."),
     steps: int = typer.Option(None, min=1, help="Budget in optimiser steps: schedule and warm-up run over steps, "
@@ -59,18 +61,31 @@ def train(
     restart: bool = typer.Option(False, help="Ignore an existing checkpoint and start from scratch."),
     select_best: bool = typer.Option(False, "--select-best",
                                      help="Do not train: write WEIGHTS_ROOT/best.json from the trained WeightedPose variants."),
+    promote: Path = typer.Option(None, "--promote", metavar="RUN_DIR",
+                                 help="Do not train: ship the finished run RUN_DIR as WEIGHTS_ROOT/<its policy>/ "
+                                      "(model.pt, config.json, metrics.json, training log). Refused unless its "
+                                      "config.json names a trainable policy whose model loads model.pt, its "
+                                      "metrics.json has finite validation errors and its progress.json says done; "
+                                      "a WeightedPose variant also re-selects best.json."),
 ) -> None:
-    """Train POLICY on DATA; resumes from OUT/checkpoint.pt; writes model.pt, config.json, metrics.json,
-    train_log.csv and train_log.png into OUT."""
+    """Train POLICY on DATA into a run folder (OUT, default runs/train/POLICY; resumes from its
+    checkpoint.pt): model.pt, config.json, metrics.json, train_log.csv and train_log.png.
+    The shipped weights (policies/weights) change only with --promote RUN_DIR."""
+    if promote is not None and select_best:
+        raise typer.BadParameter("give --promote or --select-best, not both (--promote re-selects best.json itself)",
+                                 param_hint="'--promote'")
+    if promote is not None:
+        _promote(promote, weights_root)
+        return
     if select_best:
-        from wpbench.training.best import select_best as choose
-        from wpbench.training.config import default_weights_root
+        from wpbench.weights import select_best as choose
+        from wpbench.weights import weights_root_or_shipped
 
-        weights_root = weights_root or default_weights_root()
+        weights_root = weights_root_or_shipped(weights_root)
         best = choose(weights_root)
         if best is None:
             typer.echo(f"Error: no trained WeightedPose variant under {weights_root}; "
-                       "train one with `wpbench train --policy wp-postsvd-t`", err=True)
+                       "train one with `wpbench train --policy wp-postsvd-t` and ship it with `--promote`", err=True)
             raise typer.Exit(2)
         typer.echo(f"best: {best['policy']} ({best['criterion']}: {best['candidates']}) -> {weights_root}/best.json")
         return
@@ -100,7 +115,21 @@ def train(
         typer.echo(f"  val {kind}: rotation {values['rot_deg']:.2f} deg, translation {values['trans_m'] * 100:.2f} cm, "
                    f"point {values['point_m'] * 100:.2f} cm (n={values['n']})")
     typer.echo(f"weights: {config.out}/model.pt ({metrics['train_wall_s'] / 60:.1f} min, "
-               f"peak RSS {metrics['peak_rss_mib']:.0f} MiB)")
+               f"peak RSS {metrics['peak_rss_mib']:.0f} MiB); ship them with `wpbench train --promote {config.out}`")
+
+
+def _promote(run_dir: Path, weights_root: Path | None) -> None:
+    from wpbench.weights import promote
+
+    try:
+        shipped = promote(run_dir, weights_root)
+    except ValueError as err:
+        typer.echo(f"Error: {err}", err=True)
+        raise typer.Exit(2)
+    typer.echo(f"promoted {shipped['policy']} (model_hash {shipped['model_hash']}): {run_dir} -> {shipped['weights_dir']}")
+    best = shipped["best"]
+    if best is not None:
+        typer.echo(f"best WeightedPose variant: {best['policy']} ({best['criterion']}: {best['candidates']})")
 
 
 def parse_model_options(options: list[str]) -> dict:

@@ -44,22 +44,26 @@ class PaperTableConfig:
     mirror_views: bool = DEFAULT_MIRROR_VIEWS  # every second subset answered in the mirrored scene, as they do
 
 
-def _models_for(policy: str) -> dict[str, tuple]:
-    """{kind: (torch model, action points, anchor points)} answering each kind for ``policy``.
-
-    The point counts are those the model was trained with (the learned policies subsample
-    their observations to them too); the oracle routes each kind to its specialist.
-    """
+def _policies_for(policy: str, cfg: PaperTableConfig) -> dict[str, object]:
+    """{kind: the LearnedPolicy answering that kind for ``policy``} (the oracle routes each kind to
+    its specialist). The pose errors use each one's model, point counts, seed, subsets and mirrored
+    views, so they measure what the policy answers in the simulator."""
     from wpbench.policies.learned import LearnedPolicy
 
-    def loaded(name: str) -> tuple:
-        learned = LearnedPolicy(policy=name)
-        return learned.model, learned.num_action_points, learned.num_anchor_points
+    def loaded(name: str) -> LearnedPolicy:
+        return LearnedPolicy(policy=name, subsets=cfg.subsets, mirror_views=cfg.mirror_views)
 
     if policy == "oracle":
         return {"articulated": loaded("gf"), "free-floating": loaded("tp")}
-    model = loaded(policy)
-    return {kind: model for kind in KINDS}
+    learned = loaded(policy)
+    return {kind: learned for kind in KINDS}
+
+
+def _as_policy(learned) -> dict:
+    """The ``wpbench.training.evaluate`` arguments that answer as ``learned`` does."""
+    return {"num_action": learned.num_action_points, "num_anchor": learned.num_anchor_points,
+            "seed": learned.config.seed, "subsets": learned.config.subsets,
+            "mirror_views": learned.config.mirror_views}
 
 
 def pose_errors(cfg: PaperTableConfig, policy: str) -> dict[tuple[str, str], dict[str, float]]:
@@ -67,15 +71,14 @@ def pose_errors(cfg: PaperTableConfig, policy: str) -> dict[tuple[str, str], dic
     from wpbench.data.dataset import CrossPoseDataset
     from wpbench.training.evaluate import evaluate
 
-    models = _models_for(policy)
+    learned = _policies_for(policy, cfg)
     out = {}
     for split in SPLITS:
         directory = Path(cfg.data) / split
         for kind in KINDS:
-            model, num_action, num_anchor = models[kind]
             dataset = CrossPoseDataset(directory, kinds=(kind,))
-            out[(split, kind)] = evaluate(model, dataset, (kind,), cfg.samples_per_kind, num_action, num_anchor,
-                                          subsets=cfg.subsets, mirror_views=cfg.mirror_views)[kind]
+            out[(split, kind)] = evaluate(learned[kind].model, dataset, (kind,), cfg.samples_per_kind,
+                                          **_as_policy(learned[kind]))[kind]
     return out
 
 
@@ -84,13 +87,11 @@ def category_errors(cfg: PaperTableConfig, policy: str) -> dict[str, dict[str, d
     from wpbench.data.dataset import CrossPoseDataset
     from wpbench.training.evaluate import evaluate_by_category
 
-    models = _models_for(policy)
+    learned = _policies_for(policy, cfg)
     out = {}
     for kind in KINDS:
-        model, num_action, num_anchor = models[kind]
         dataset = CrossPoseDataset(Path(cfg.data) / "val", kinds=(kind,))
-        out[kind] = evaluate_by_category(model, dataset, kind, num_action, num_anchor, subsets=cfg.subsets,
-                                         mirror_views=cfg.mirror_views)
+        out[kind] = evaluate_by_category(learned[kind].model, dataset, kind, **_as_policy(learned[kind]))
     return out
 
 

@@ -21,9 +21,8 @@ Weight scales: the point terms are in m^2. The rotation term
 ``|R - R_gt|_F^2`` is unitless; its weight 0.05 m^2 = (22 cm)^2 makes a rotation cost
 about what it moves the surface of a 22 cm object, so the 16 cm block's tilt, which the
 point terms barely see, is paid for. The translation term (the goal position of the
-action centroid, m^2) weighs 3. Until this release they were 0.01 and 1; trained the
-same way, 0.05 and 3 took val blocks from 5.5 to 4.7 deg (8-subset consensus) and left
-the rest as it was (results/experiments/README.md, "wp-postsvd-t's loss weights").
+action centroid, m^2) weighs 3. How these weights compare with others on val is in
+docs/experiment-log.md ("wp-postsvd-t's loss weights").
 TAX-Pose's terms use displacement 1, direct correspondence 1, consistency 0.1
 (the consistency term is a regulariser; the first two carry the supervision).
 """
@@ -43,9 +42,9 @@ PoseForTaxPoseTerms = Literal["output", "taxpose_branch"]
 
 # A symmetric object's other goals count only once the output is this close to one of them
 # (the default; a policy can choose its own, ``wpbench.training.specs``). 180 = every goal counts:
-# the nearest equivalent goal is always the target. A gate (the 15 deg of earlier releases) makes
-# the target flip where the stored goal flips (a cube's at a 45 deg turn), and the network learns
-# the average of both sides (results/experiments/README.md, "symmetric-goal gate").
+# the nearest equivalent goal is always the target. A smaller gate makes the target flip where the
+# stored goal flips (a cube's at a 45 deg turn), and the network learns the average of both sides
+# (measured in docs/experiment-log.md, "symmetric-goal gate").
 RETARGET_WITHIN_DEG = 180.0
 
 

@@ -4,8 +4,11 @@
 - ``config``: :class:`TrainConfig` (budget, batch, learning rate, point counts).
 - ``batches``: shuffling, point subsampling and augmentation of training batches.
 - ``evaluate``: validation errors (rotation deg, translation m, point error m) per kind.
-- ``checkpoint``: save / resume the full training state; final weights + config + metrics.
+- ``checkpoint``: save / resume the full training state.
 - ``log``: ``train_log.csv``, ``progress.json`` and the ``train_log.png`` plot.
-- ``loop``: the trainer that ties them together.
-- ``best``: choose the best WeightedPose variant (``policies/weights/best.json``).
+- ``loop``: the trainer that ties them together; it writes the run folder
+  (``runs/train/<policy>/`` by default).
+
+The files of a trained policy, loading, hashing, ``best.json`` and the promotion of a run into
+the shipped weights are ``wpbench.weights``. Training never imports ``wpbench.policies``.
 """

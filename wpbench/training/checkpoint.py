@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from wpbench.training.artifacts import atomic_torch_save
+from wpbench.weights import atomic_torch_save
 
 CHECKPOINT_FILE = "checkpoint.pt"
 

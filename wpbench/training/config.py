@@ -5,16 +5,26 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from wpbench.weights import shipped_weights_root
 
-def default_weights_root() -> Path:
-    """``policies/weights`` of the installed ``policies`` package (where the learned policies look)."""
-    from wpbench import policies
-    return Path(policies.__file__).resolve().parent / "weights"
+# Where a training writes when no --out is given: ``runs/train/<policy>/`` (relative to the
+# working directory). Runs are shipped into policies/weights/ only by ``wpbench train --promote``.
+RUNS_ROOT = Path("runs") / "train"
+
+
+def default_run_dir(policy: str) -> Path:
+    """The run folder of ``policy`` when no --out is given."""
+    return RUNS_ROOT / policy
 
 
 @dataclass
 class TrainConfig:
     """A training run of ``policy`` on ``data`` for at most ``minutes`` of wall time.
+
+    out: the run folder it writes [default: ``runs/train/<policy>``]; never the shipped weights
+        unless asked for (``wpbench.weights.promote`` ships a finished run).
+    weights_root: where the trained Goal Flow and TAX-Pose a WeightedPose variant starts from
+        are read [default: the shipped ``policies/weights``; ``runs/train`` to start from runs].
 
     minutes: wall-time budget of the training epochs (steps, validations, checkpoints and
         logs), summed over resumed runs; the final validation runs after it.
@@ -77,8 +87,8 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         self.data = Path(self.data)
-        self.weights_root = Path(self.weights_root) if self.weights_root is not None else default_weights_root()
-        self.out = Path(self.out) if self.out is not None else self.weights_root / self.policy
+        self.weights_root = Path(self.weights_root) if self.weights_root is not None else shipped_weights_root()
+        self.out = Path(self.out) if self.out is not None else default_run_dir(self.policy)
         if self.minutes <= 0:
             raise ValueError(f"minutes must be > 0, got {self.minutes}")
         for name in ("steps_per_epoch", "batch_size", "num_action_points", "num_anchor_points",

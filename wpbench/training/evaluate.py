@@ -1,14 +1,19 @@
-"""Validation errors of a model on a dataset, per kind (DESIGN.md metrics).
+"""Validation errors of a model on a dataset, per kind (metrics as in ``wpbench.geometry.metrics``).
 
 rotation error (deg), translation error (m, goal position of the action
 centroid), point error (m, mean |T_pred p - T_gt p| over the action points),
 all against the equivalent goal nearest to the prediction in rotation (for a symmetric
 object every equivalent goal is correct; ``wpbench.data.equivalent_goals``).
 
-``subsets`` > 1 answers each sample from that many random subsets of its stored clouds,
-fused like the learned policies do (``wpbench.models.subset_ensemble``; with ``mirror_views``
-every second one in the mirrored scene); the errors are then measured on every stored action
-point. Training validates with one subset.
+Two ways to answer a sample:
+
+- ``subsets=None`` (training's per-epoch and final validation): one random subset of each
+  stored cloud, drawn for a whole batch from a torch generator seeded ``seed``; the errors
+  are measured on the action points the model saw.
+- ``subsets=K``: the sample answered exactly as a learned policy with that ``seed``,
+  ``subsets`` and ``mirror_views`` answers it in the simulator
+  (``wpbench.models.subset_ensemble.ensemble_predict``); the errors are measured on every
+  stored action point. The paper table measures this way.
 """
 
 from __future__ import annotations
@@ -21,9 +26,51 @@ from wpbench.data.config import KIND_CODE, KINDS
 from wpbench.data.dataset import CrossPoseDataset
 from wpbench.data.equivalent_goals import nearest_goal
 from wpbench.geometry import metrics
-from wpbench.models import subset_ensemble as ensemble
 from wpbench.models.configs import DEFAULT_MIRROR_VIEWS
+from wpbench.models.subset_ensemble import ensemble_predict
 from wpbench.training.batches import make_batch, subsample_points
+
+
+def _check_subsets(subsets: int | None) -> None:
+    if subsets is not None and subsets < 1:
+        raise ValueError(f"subsets must be >= 1 (or None for one subset per sample, as in training), got {subsets}")
+
+
+@torch.no_grad()
+def predicted_poses(
+    model: torch.nn.Module,
+    dataset: CrossPoseDataset,
+    indices: torch.Tensor,
+    num_action: int,
+    num_anchor: int,
+    batch_size: int = 16,
+    seed: int = 0,
+    subsets: int | None = None,
+    mirror_views: bool = DEFAULT_MIRROR_VIEWS,
+):
+    """Yield, batch by batch, (batch, T_pred (B, 4, 4) float64, points (B, N, 3) the errors are
+    measured on, first-subset model output) for the samples ``indices`` (module docstring for
+    ``subsets``). ``batch_size`` counts model inputs: with K subsets, batch_size // K samples a batch.
+    The model is put in eval mode while it answers."""
+    _check_subsets(subsets)
+    was_training = model.training
+    model.eval()
+    generator = torch.Generator().manual_seed(seed)
+    step = batch_size if subsets is None else max(1, batch_size // subsets)
+    try:
+        for start in range(0, len(indices), step):
+            batch = make_batch(dataset, indices[start:start + step])
+            if subsets is None:
+                action = subsample_points(batch["action"], num_action, generator)
+                anchor = subsample_points(batch["anchor"], num_anchor, generator)
+                output = model(action, anchor)
+                yield batch, output.transform.double(), action, output
+            else:
+                answer = ensemble_predict(model, batch["action"], batch["anchor"], num_action, num_anchor,
+                                          subsets, mirror_views, seed)
+                yield batch, answer.transform, batch["action"], answer.first
+    finally:
+        model.train(was_training)
 
 
 @torch.no_grad()
@@ -35,47 +82,25 @@ def per_sample_errors(
     num_anchor: int,
     batch_size: int = 16,
     seed: int = 0,
-    subsets: int = 1,
+    subsets: int | None = None,
     mirror_views: bool = DEFAULT_MIRROR_VIEWS,
 ) -> dict[str, torch.Tensor]:
     """Errors of each sample ``indices`` of ``dataset``: {"rot_deg", "trans_m", "point_m"[, "w"]}, each (len(indices),).
 
-    The clouds are subsampled to the model's point counts with a fixed seed (``subsets`` times,
-    fused, when > 1). NaN predictions give NaN errors.
+    ``subsets``: None = one subset per sample, as in training; K = as the learned policy answers
+    with K subsets (module docstring). NaN predictions give NaN errors; "w" (models that predict a
+    mixing weight) is the first subset's mean weight.
     """
-    if subsets < 1:
-        raise ValueError(f"subsets must be >= 1, got {subsets}")
-    was_training = model.training
-    model.eval()
-    generator = torch.Generator().manual_seed(seed)
     columns: dict[str, list[torch.Tensor]] = {"rot_deg": [], "trans_m": [], "point_m": [], "w": []}
-    try:
-        for start in range(0, len(indices), batch_size):
-            batch = make_batch(dataset, indices[start:start + batch_size])
-            action = subsample_points(batch["action"], num_action, generator)
-            anchor = subsample_points(batch["anchor"], num_anchor, generator)
-            output = model(action, anchor)
-            T_pred = output.transform.double()
-            count = ensemble.subsets_worth_drawing(subsets, (batch["action"].shape[1], batch["anchor"].shape[1]),
-                                                   (num_action, num_anchor))
-            if count > 1:
-                views = ensemble.view_transforms(count, mirror_views)
-                more = []
-                for view in views[1:, None]:  # the first subset was answered as observed
-                    seen = [ensemble.into_view(subsample_points(batch[key], n, generator)[None], view)[0]
-                            for key, n in (("action", num_action), ("anchor", num_anchor))]
-                    more.append(ensemble.out_of_view(model(*seen).transform.double()[None], view)[0])
-                action = batch["action"]
-                T_pred = ensemble.fuse_goal_clouds(action.double(), torch.stack([T_pred, *more]))
-            if "w" in output.diagnostics:
-                columns["w"].append(output.diagnostics["w"].reshape(len(T_pred), -1).mean(dim=1).double())
-            T_gt = nearest_goal(T_pred, batch["gt_equivalents"].double())
-            pts = action.double()
-            columns["rot_deg"].append(metrics.rotation_error_deg(T_pred[:, :3, :3], T_gt[:, :3, :3]))
-            columns["trans_m"].append(metrics.translation_error(T_pred, T_gt, pts.mean(dim=1)))
-            columns["point_m"].append(metrics.point_error(T_pred, T_gt, pts)[0])
-    finally:
-        model.train(was_training)
+    for batch, T_pred, points, output in predicted_poses(model, dataset, indices, num_action, num_anchor, batch_size,
+                                                         seed, subsets, mirror_views):
+        if "w" in output.diagnostics:
+            columns["w"].append(output.diagnostics["w"].reshape(len(T_pred), -1).mean(dim=1).double())
+        T_gt = nearest_goal(T_pred, batch["gt_equivalents"].double())
+        pts = points.double()
+        columns["rot_deg"].append(metrics.rotation_error_deg(T_pred[:, :3, :3], T_gt[:, :3, :3]))
+        columns["trans_m"].append(metrics.translation_error(T_pred, T_gt, pts.mean(dim=1)))
+        columns["point_m"].append(metrics.point_error(T_pred, T_gt, pts)[0])
     # "w" only for models that predict a mixing weight.
     return {key: torch.cat(values) if values else torch.zeros(0, dtype=torch.float64)
             for key, values in columns.items() if values or key != "w"}
@@ -90,11 +115,12 @@ def evaluate(
     num_anchor: int,
     batch_size: int = 16,
     seed: int = 0,
-    subsets: int = 1,
+    subsets: int | None = None,
     mirror_views: bool = DEFAULT_MIRROR_VIEWS,
 ) -> dict[str, dict[str, float]]:
     """{kind: {"rot_deg", "trans_m", "point_m", "failures", "n"[, "w"]}} on ``per_kind`` samples of each kind
-    spread evenly over the split (fixed subsampling seed, so epochs are comparable).
+    spread evenly over the split (fixed subsampling seed, so epochs are comparable; ``subsets`` as in
+    :func:`per_sample_errors`).
 
     Means are over finite predictions; ``failures`` counts samples whose prediction was NaN.
     """
@@ -116,7 +142,7 @@ def evaluate_by_category(
     num_action: int,
     num_anchor: int,
     seed: int = 0,
-    subsets: int = 1,
+    subsets: int | None = None,
     mirror_views: bool = DEFAULT_MIRROR_VIEWS,
 ) -> dict[str, dict[str, float]]:
     """{category: the ``evaluate`` statistics} over every sample of ``kind`` in ``dataset``."""

@@ -8,7 +8,7 @@ import io
 import json
 from pathlib import Path
 
-from wpbench.training.artifacts import atomic_write_text
+from wpbench.weights import atomic_write_text
 
 LOG_FILE, PLOT_FILE, PROGRESS_FILE = "train_log.csv", "train_log.png", "progress.json"
 

@@ -4,7 +4,8 @@ Read top to bottom: load data -> build (or warm-start) the model -> resume from
 ``checkpoint.pt`` if there is one -> epochs of ``steps_per_epoch`` optimiser
 steps, each followed by validation, a log row, a checkpoint and the plot ->
 stop at the time budget (or ``max_steps``) -> final validation -> ``model.pt``,
-``config.json``, ``metrics.json``.
+``config.json``, ``metrics.json`` (``wpbench.weights.save_trained``) in the run folder.
+Shipping a run is a separate step (``wpbench.weights.promote``).
 """
 
 from __future__ import annotations
@@ -21,17 +22,16 @@ from wpbench.data.config import KINDS
 from wpbench.data.dataset import CrossPoseDataset
 from wpbench.models.loss_presets import compute_loss
 from wpbench.training import log as train_log
-from wpbench.training.artifacts import config_to_json, load_trained_model, save_final
 from wpbench.training.batches import make_batch, prepare, shuffled_batches
-from wpbench.training.best import select_best
 from wpbench.training.checkpoint import load_checkpoint, save_checkpoint
 from wpbench.training.config import TrainConfig
 from wpbench.training.evaluate import evaluate, mean_point_error
 from wpbench.training.specs import PolicySpec, get_spec
 from wpbench.training.warmup import in_warmup, set_phase
+from wpbench.weights import config_to_json, load_trained_model, save_trained
 
-# The PNG of the training log is redrawn this often (and at the end): matplotlib costs about a
-# second a plot when three trainings share the two cores; the CSV is written every epoch.
+# The PNG of the training log is redrawn this often (and at the end), since a plot costs far more
+# than an epoch's CSV row, which is written every epoch.
 PLOT_EVERY_EPOCHS = 10
 
 
@@ -155,8 +155,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
          + (f", the first {warmup:.0%} training the mixing head alone" if warmup > 0 else ""))
 
     # The budget is wall time: validation, checkpoints and the log count too, so that "trained for N
-    # minutes" is what a user waits (earlier releases counted only steps and validation; the rest
-    # was about 18% more with three trainings sharing two cores).
+    # minutes" is what a user waits.
     clock_started, trained_before = time.perf_counter(), elapsed
 
     def trained() -> float:
@@ -258,10 +257,6 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
         "samples_seen": step * config.batch_size,
         "peak_rss_mib": round(peak_rss_mib(), 1),
     }
-    import hashlib
-
-    model_hash = hashlib.sha256(b"".join(v.detach().float().numpy().tobytes() for v in model.state_dict().values()
-                                         if v.is_floating_point())).hexdigest()[:16]
     description = {
         "policy": config.policy,
         "model": spec.model,
@@ -272,16 +267,11 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
         "num_action_points": config.num_action_points,
         "num_anchor_points": config.num_anchor_points,
         "data": {"path": str(config.data), **{f"{k}_manifest_hash": v for k, v in data_hashes.items()}},
-        "model_hash": model_hash,
         "init": origin,
         "train_config": config.to_json(),
     }
-    save_final(out, model, description, metrics)
+    save_trained(out, model, description, metrics)
     train_log.write_progress(out, {"policy": config.policy, "status": "done", "epoch": epoch, "step": step,
                                    "elapsed_min": round(elapsed / 60, 2), "budget_min": config.minutes,
                                    "metrics": metrics})
-    if spec.model == "weightedpose":
-        best = select_best(config.weights_root)
-        if best is not None:
-            echo(f"best WeightedPose variant so far: {best['policy']} ({config.weights_root}/best.json)")
     return metrics

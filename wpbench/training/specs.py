@@ -27,18 +27,16 @@ class PolicySpec:
     mixing_learning_rate: float = 1e-3
     # Random scene scale in [1 - s, 1 + s] (``wpbench.data.augment.random_scale``). On for the
     # policies that see furniture motion: it ties a drawer's travel to the chest's size. Off for
-    # TAX-Pose, trained before it existed (its block is always the same 16 cm cube).
+    # TAX-Pose, whose shipped weights are trained without it (its block is always the same 16 cm cube).
     augment_scale: float = 0.0
     # Random stretch of drawer samples along their slide (``random_slide_stretch``): "deeper chest,
     # longer slide", which the uniform scale does not teach (a chest's depth is drawn on its own).
-    # On for gf and the WeightedPose variants because their shipped weights were trained with it (a
-    # same-day control without it did as well on val: results/experiments/README.md); TAX-Pose never
-    # sees a drawer move.
+    # On for gf and the WeightedPose variants, as their shipped weights are trained; TAX-Pose never
+    # sees a drawer move. Its effect is measured in docs/experiment-log.md.
     augment_stretch: float = 0.0
     # A symmetric object's other equivalent goals become the training target once the prediction
-    # is within this angle of one of them (``loss_presets.compute_loss``); 180 = always the nearest,
-    # the default of every policy since TAX-Pose trained that way reached 6.5 deg on val blocks
-    # against 12.3 with the earlier 15 deg gate (results/experiments/README.md).
+    # is within this angle of one of them (``loss_presets.compute_loss``); 180 = always the nearest
+    # (why: ``loss_presets.RETARGET_WITHIN_DEG``; measured in docs/experiment-log.md).
     retarget_within_deg: float = RETARGET_WITHIN_DEG
 
 

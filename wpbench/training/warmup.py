@@ -4,9 +4,9 @@ A WeightedPose variant starts from a converged Goal Flow and a converged
 TAX-Pose, but its mixing-weight head is new (Goal Flow alone never uses w).
 Training everything at once from there lets the gradients of a random w (0.5:
 half flow, half correspondences, wrong for both kinds) move the trained
-branches before w has learned which branch to trust. Measured on data3 with
-19 min of joint fine-tuning, the fused pose ended *worse* on articulated
-objects than Goal Flow alone (val 7.3 deg / 5.8 cm against 5.8 deg / 5.0 cm).
+branches before w has learned which branch to trust, and the fused pose can end
+worse on articulated objects than Goal Flow alone (docs/experiment-log.md,
+"mixing warm-up").
 
 So the first ``fraction`` of the time budget trains only the mixing head with
 both branches frozen (a step then costs about one forward pass: nothing
