@@ -4,7 +4,8 @@ Two sources, one output format ((N, 3) float32 per object):
 - ``camera``: a SAPIEN depth + segmentation picture back-projected to the world,
   the points of each object picked by segmentation id (partial, view-dependent,
   as a real depth camera gives);
-- ``mesh``: area-weighted samples of the collision geometry (complete, no renderer).
+- ``mesh``: area-weighted samples of the collision geometry (all of it, or what a camera
+  would see of it: ``wpbench.sim.visibility``; no renderer).
 Both are reduced to a fixed size by farthest-point sampling (fpsample).
 """
 
