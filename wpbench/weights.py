@@ -162,13 +162,24 @@ def load_trained_model(weights_dir: Path, policy: str | None = None) -> tuple[to
         raise ValueError(f"{Path(weights_dir) / CONFIG_FILE} describes no buildable model ({err}); "
                          f"retrain with {_train_command(policy)}") from err
     state = load_state(weights_dir, policy)
-    try:
-        model.load_state_dict(state, strict=True)
-    except RuntimeError as err:
-        raise ValueError(f"{Path(weights_dir) / MODEL_FILE} does not match its config.json ({err}); "
-                         f"retrain with {_train_command(policy)}") from err
+    mismatch = _state_mismatch(model.state_dict(), state)
+    if mismatch:
+        raise ValueError(f"{Path(weights_dir) / MODEL_FILE} does not match its config.json ({mismatch}); "
+                         f"retrain with {_train_command(policy)}")
+    model.load_state_dict(state, strict=True)
     model.eval()
     return model, config
+
+
+def _state_mismatch(expected: dict[str, torch.Tensor], state: dict[str, torch.Tensor]) -> str:
+    """How ``state`` differs from the tensors a model expects, in one line ("" when it fits)."""
+    missing = [k for k in expected if k not in state]
+    unexpected = [k for k in state if k not in expected]
+    reshaped = [k for k in expected if k in state and expected[k].shape != state[k].shape]
+    parts = [f"{len(keys)} {what}, e.g. {keys[0]!r}"
+             for keys, what in ((missing, "tensors missing"), (unexpected, "unexpected tensors"),
+                                (reshaped, "tensors of another shape")) if keys]
+    return "; ".join(parts)
 
 
 # --- best.json ----------------------------------------------------------------------------------
