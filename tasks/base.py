@@ -25,6 +25,12 @@ cross-pose and kind of the current stage leave the env (only privileged policies
 instance), ``"restart_rng"`` (draw the furniture from the episode seed alone, as on a
 fresh env), ``"start_fraction"`` (articulated stages: start the joint at this fraction of
 the way from closed to open instead of the task's own draw).
+
+Executor (``executor=``, one of ``wpbench.names.EXECUTORS``; docs/executors.md):
+``"ideal"`` (default) drives the joint to the best-matching value / teleports the object;
+``"gripper"`` has a floating Panda hand carry the cross-pose out. Either way the executor
+works from the stage's observed clouds and the predicted cross-pose only. Every stage
+result has ``failure_reason``: "" or a code of ``wpbench.sim.failure``.
 """
 
 from __future__ import annotations
@@ -40,11 +46,13 @@ from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils.structs.types import SimConfig
 
-from wpbench.sim.executor import execute_articulated, execute_free
+from wpbench.sim.executor import (BODY_STILL_ANG, BODY_STILL_LIN, JOINT_STILL_VEL, execute_articulated,
+                                  execute_free)
 from wpbench.sim.free_object import build_free_object, raw_body
 from wpbench.sim.furniture import SceneFurniture
 from wpbench.sim.observation import camera_points_by_segment, fixed_size, sample_mesh_surface
-from wpbench.names import ARTICULATED, FREE, OBS_MODES
+from wpbench.names import ARTICULATED, EXECUTORS, FREE, OBS_MODES
+from wpbench.sim import failure
 from wpbench.sim.visibility import look_at_frame, visible_mask
 from wpbench.sim.poses import matrix_to_pose, pose_to_matrix, project_to_rigid, transform_points, yaw_matrix
 
@@ -97,10 +105,20 @@ class CrossPoseEnv(BaseEnv):
         render_backend: str | None = None,
         extra_train_instances: int = 0,
         robot_uids=None,
+        executor: str = "ideal",
+        grasp: str = "friction",
         **kwargs,
     ):
         if obs_mode not in OBS_MODES:
             raise ValueError(f"unknown obs_mode {obs_mode!r}; valid: {', '.join(OBS_MODES)}")
+        if executor not in EXECUTORS:
+            raise ValueError(f"unknown executor {executor!r}; valid: {', '.join(EXECUTORS)}")
+        from wpbench.sim.gripper_executor import GRASPS
+
+        if grasp not in GRASPS:
+            raise ValueError(f"unknown grasp {grasp!r}; valid: {', '.join(GRASPS)}")
+        self.executor = executor
+        self.grasp = grasp
         from wpbench.assets.library import load_library
         from wpbench.assets.ravens import get_ravens_object
 
@@ -196,6 +214,11 @@ class CrossPoseEnv(BaseEnv):
             self._ms_free = build_free_object(self.scene, self.free_spec, self.free_scale)
             self.free_body = raw_body(self._ms_free)
             self.free_mesh = self.free_spec.visual_mesh(self.free_scale)
+        self.gripper = None
+        if self.executor == "gripper":
+            from wpbench.sim.gripper import FloatingGripper
+
+            self.gripper = FloatingGripper(self.scene)
 
     def _floor_clearance(self) -> float:
         """How much to raise the furniture so its door never sweeps through the floor.
@@ -460,10 +483,31 @@ class CrossPoseEnv(BaseEnv):
             T = project_to_rigid(T)
         except ValueError as err:
             # An unusable prediction is the policy's failure, not the benchmark's crash.
-            return ExecutionResult(ok=False, reason=f"invalid cross-pose: {err}")
+            return ExecutionResult(ok=False, reason=failure.INVALID_PREDICTION, detail=f"invalid cross-pose: {err}")
+        if self.executor == "gripper":
+            return self._execute_with_gripper(state, T)
         if state.kind == ARTICULATED:
             return execute_articulated(self.furniture, T, state.action_surface, self._physics_step, 1.0 / SIM_FREQ)
         return execute_free(self.free_body, T, self._physics_step, 1.0 / SIM_FREQ)
+
+    def _execute_with_gripper(self, state: StageState, T: np.ndarray):
+        """The floating hand, given this stage's observed action cloud and T (never the truth)."""
+        from wpbench.sim.gripper_executor import Scene, execute_articulated_gripper, execute_free_gripper
+
+        action = self.get_obs()["action_points"][0].numpy().astype(np.float64)
+        if state.kind == ARTICULATED:
+            f = self.furniture
+            scene = Scene(self.gripper, self.scene, self.grasp, self._physics_step, 1.0 / SIM_FREQ,
+                          velocities=lambda: [f.articulation.get_qvel()],
+                          is_still=lambda: abs(f.qvel) < JOINT_STILL_VEL)
+            return execute_articulated_gripper(scene, action, T, f.free_target_joint, f.hold_target_joint_here)
+        body = self.free_body
+        scene = Scene(self.gripper, self.scene, self.grasp, self._physics_step, 1.0 / SIM_FREQ,
+                      velocities=lambda: [np.asarray(body.linear_velocity), np.asarray(body.angular_velocity),
+                                          np.asarray(body.entity_pose.p)],
+                      is_still=lambda: np.linalg.norm(body.linear_velocity) < BODY_STILL_LIN
+                      and np.linalg.norm(body.angular_velocity) < BODY_STILL_ANG)
+        return execute_free_gripper(scene, action, T)
 
     def _score_stage(self, state: StageState, T_pred: np.ndarray, result) -> dict[str, Any]:
         from wpbench.geometry import metrics as gm
@@ -492,7 +536,10 @@ class CrossPoseEnv(BaseEnv):
             "point_mse": float(point_mse[0]),
             "executed": bool(result.ok),
             "at_rest": bool(result.at_rest),
-            "failure_reason": "" if success else (result.reason or "goal not reached"),
+            "failure_reason": "" if success else self._failure_reason(state, result),
+            "failure_detail": "" if success else result.detail,
+            "executor": self.executor,
+            "grasp": self.grasp if self.executor == "gripper" else "",
             "sim_seconds": result.sim_seconds,
             "observation_fallback": self.observation_fallback,
             "gt_cross_pose": T_gt.tolist(),
@@ -507,6 +554,19 @@ class CrossPoseEnv(BaseEnv):
             out["object"] = self.free_spec.name
             out["object_scale"] = self.free_scale
         return out
+
+    def _failure_reason(self, state: StageState, result) -> str:
+        """The code of a failed stage: the executor's own, else what the final state shows."""
+        if result.reason:
+            return failure.check_reason(result.reason)
+        if state.kind == ARTICULATED:
+            if self._open_distance(state.q_start) >= OPEN_TOLERANCE:
+                return failure.NOT_OPEN_ENOUGH
+            return failure.NOT_AT_REST
+        center, rotation, half = self.furniture.in_region_world(self.root_pose)
+        centroid = transform_points(pose_to_matrix(self.free_body.entity_pose), self.free_mesh.center_mass[None])[0]
+        inside = bool(np.all(np.abs(rotation.T @ (centroid - center)) <= half))
+        return failure.NOT_AT_REST if inside else failure.NOT_IN_REGION
 
     # ------------------------------------------------------------------ success
     def _open_distance(self, q_start: float) -> float:

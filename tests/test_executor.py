@@ -55,7 +55,7 @@ def test_non_finite_prediction_fails_with_reason(place_env, bad):
     _, _, terminated, _, info = place_env.step(bad)
     r = info["stage_result"]
     assert bool(terminated[0]) and not r["success"]
-    assert "invalid cross-pose" in r["failure_reason"]
+    assert r["failure_reason"] == "invalid_prediction" and "invalid cross-pose" in r["failure_detail"]
     assert np.isnan(r["rot_err_deg"]) and np.isnan(r["trans_err_m"])
 
 
@@ -84,4 +84,4 @@ def test_runaway_simulation_is_a_failure_not_a_crash(place_env):
 
     result = simulate_until_still(base.advance_physics, 1 / 200, lambda: [np.asarray(base.free_body.linear_velocity)],
                                   lambda: False, max_seconds=0.2)
-    assert not result.ok and "blow-up" in result.reason
+    assert not result.ok and result.reason == "blow_up" and "blow-up" in result.detail

@@ -21,6 +21,7 @@ import numpy as np
 from sapien import physx
 from scipy.optimize import minimize_scalar
 
+from wpbench.sim.failure import BLOW_UP, NOT_AT_REST
 from wpbench.sim.furniture import SceneFurniture
 from wpbench.sim.poses import matrix_to_pose, pose_to_matrix, transform_points
 
@@ -35,8 +36,9 @@ MAX_DEPENETRATION_SPEED = 0.5  # m/s: a pose inside a wall is pushed out gently,
 
 @dataclass
 class ExecutionResult:
-    ok: bool                      # False when the simulation blew up or the pose was unusable
-    reason: str = ""
+    ok: bool                      # False when the simulation blew up, the pose was unusable or the robot failed
+    reason: str = ""              # a code of wpbench.sim.failure ("" when nothing went wrong)
+    detail: str = ""              # free text about the reason
     sim_seconds: float = 0.0
     at_rest: bool = False
     details: dict = field(default_factory=dict)
@@ -70,7 +72,8 @@ def best_joint_value(furniture: SceneFurniture, cross_pose: np.ndarray, link_poi
     return float(res.x) if res.fun <= costs[k] else float(grid[k])
 
 
-def _blown_up(values: list[np.ndarray]) -> str:
+def blown_up(values: list[np.ndarray]) -> str:
+    """A description of what blew up in ``values`` (non-finite or runaway), "" when all is well."""
     for v in values:
         if not np.all(np.isfinite(v)):
             return "simulation blow-up: non-finite state"
@@ -91,13 +94,13 @@ def simulate_until_still(
     n_max = int(round(max_seconds / timestep))
     for n in range(1, n_max + 1):
         step()
-        reason = _blown_up(velocities())
-        if reason:
-            return ExecutionResult(ok=False, reason=reason, sim_seconds=n * timestep)
+        detail = blown_up(velocities())
+        if detail:
+            return ExecutionResult(ok=False, reason=BLOW_UP, detail=detail, sim_seconds=n * timestep)
         still = still + 1 if is_still() else 0
         if still >= STILL_STEPS:
             return ExecutionResult(ok=True, sim_seconds=n * timestep, at_rest=True)
-    return ExecutionResult(ok=True, reason="did not come to rest", sim_seconds=n_max * timestep, at_rest=False)
+    return ExecutionResult(ok=True, reason=NOT_AT_REST, detail="did not come to rest", sim_seconds=n_max * timestep, at_rest=False)
 
 
 def execute_articulated(

@@ -23,6 +23,9 @@ from wpbench.sim.poses import pose_to_matrix, transform_points
 DRIVE_STIFFNESS = 400.0
 DRIVE_DAMPING = 40.0
 DRIVE_FORCE_LIMIT = 1e6
+# A free target joint (while a robot moves it) keeps a little damping, as real hinges and
+# slides have; the rest of the furniture stays held.
+FREE_JOINT_DAMPING = 0.5
 
 
 def _urdf_name(scene_name: str) -> str:
@@ -76,6 +79,15 @@ class SceneFurniture:
         """PD targets: the target joint to q, every other joint to its rest value."""
         for i, j in enumerate(self.joints):
             j.set_drive_target(float(q if i == self.target_index else self.rest_qpos[i]))
+
+    def free_target_joint(self) -> None:
+        """Let the target joint move freely (no spring, light damping): a robot moves it now."""
+        self.target_joint.set_drive_properties(0.0, FREE_JOINT_DAMPING, DRIVE_FORCE_LIMIT, "acceleration")
+
+    def hold_target_joint_here(self) -> None:
+        """The target joint's spring back on, holding the joint where it is now."""
+        self.target_joint.set_drive_properties(DRIVE_STIFFNESS, DRIVE_DAMPING, DRIVE_FORCE_LIMIT, "acceleration")
+        self.drive_to(self.qpos)
 
     def hold(self) -> None:
         """Gravity compensation for this physics step (what an arm holding the door provides).

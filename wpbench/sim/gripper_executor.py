@@ -1,0 +1,262 @@
+"""The ``gripper`` executor: a floating Panda hand carries out the predicted cross-pose.
+
+It sees what a policy sees (the stage's observed clouds) and the predicted cross-pose,
+nothing else. Physics decides the outcome:
+
+- Articulated: grasp the moving part where the predicted motion is largest
+  (wpbench.sim.grasp_choice), close the fingers (friction), move the hand along the
+  screw path from the identity to T (an arc about the predicted hinge, a line for a
+  slide) with bounded force and speed, release, retreat, and let the scene settle.
+  The joint is free while the hand moves it; a wrong axis pulls against the hinge and
+  the hand stalls or the part slips out of the fingers.
+- Free-floating: grasp the object from above, lift it, carry it at the predicted
+  goal's height plus a clearance to above the goal, lower it to the predicted pose,
+  release, retreat and settle. The furniture collides with hand and object all the way.
+
+When the hand misses, stalls, slips or collides it stops, lets go, and the scene is
+scored as it is (``ok`` stays True, ``reason`` says what went wrong and becomes the
+stage's failure_reason if the stage fails). Only a blow-up is not executed. Nothing raises.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from wpbench.sim.executor import ExecutionResult, blown_up, simulate_until_still
+from wpbench.sim.failure import BLOW_UP, COLLISION, GRASP_MISSED, PLANNING_FAILED, SLIPPED, STALLED_AGAINST_HINGE
+from wpbench.sim.grasp_choice import Grasp, articulated_grasp, suction_point, top_grasp, top_suction_point
+from wpbench.sim.gripper import FINGER_OPEN, FloatingGripper
+from wpbench.sim.screw_path import interpolate, path_length
+
+MAX_SPEED = 0.3              # m/s, TCP
+MAX_ANGULAR_SPEED = 1.2      # rad/s, TCP
+MIN_SEGMENT_SECONDS = 0.15
+PREGRASP_DISTANCE = 0.10     # m, the hand starts this far back along the approach
+CLOSE_SECONDS = 0.3          # fingers closing
+RELEASE_SECONDS = 0.2        # fingers opening
+HOLD_SECONDS = 0.1           # pause at the end of a path before releasing
+RETREAT_DISTANCE = 0.06      # m, back off along the approach after releasing
+HELD_OPENING = 0.003         # m: closed fingers further apart than this hold something ...
+BLOCKED_OPENING = 2 * FINGER_OPEN - 0.005  # m: ... unless they could not close at all (pads on a flat face)
+STALL_DISTANCE = 0.05        # m: the TCP this far behind its target has been stopped
+STALL_ANGLE = 0.35           # rad: ... or turned this far from it
+SUCTION_PRESS = 0.006       # m: the cup is pushed this far past the surface to seal
+SUCTION_SLIP = 0.02          # m: the cup stretched this far has let go
+GRASPS = ("friction", "suction")
+LIFT_HEIGHT = 0.05           # m, lift above the start before carrying
+CARRY_CLEARANCE = 0.03       # m, carry this far above the predicted goal, then lower
+
+
+@dataclass
+class Scene:
+    """What the executor drives: the hand, one physics step, and the settle test of the action object."""
+
+    gripper: FloatingGripper
+    ms_scene: object                  # the ManiSkill scene (suction attaches with a drive in it)
+    grasp_mode: str                   # one of GRASPS
+    step: Callable[[], None]
+    timestep: float
+    velocities: Callable[[], list[np.ndarray]]   # of the action object (blow-up check, settling)
+    is_still: Callable[[], bool]
+
+
+class _Abort(Exception):
+    def __init__(self, reason: str, detail: str = ""):
+        super().__init__(detail)
+        self.reason, self.detail = reason, detail
+
+
+def _pose_distance(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    d = float(np.linalg.norm(a[:3, 3] - b[:3, 3]))
+    ang = float(np.linalg.norm(Rotation.from_matrix(a[:3, :3].T @ b[:3, :3]).as_rotvec()))
+    return d, ang
+
+
+def _segment_seconds(a: np.ndarray, b: np.ndarray, length: float | None = None) -> float:
+    d, ang = _pose_distance(a, b)
+    return max(MIN_SEGMENT_SECONDS, (length if length is not None else d) / MAX_SPEED, ang / MAX_ANGULAR_SPEED)
+
+
+def _smooth(u: float) -> float:
+    """Minimum-jerk time scaling, 0 -> 1 with zero speed at both ends."""
+    return u**3 * (10 - 15 * u + 6 * u**2)
+
+
+class _Runner:
+    def __init__(self, scene: Scene, stall_reason: str, slip_check: bool):
+        self.s = scene
+        self.seconds = 0.0
+        self.stall_reason = stall_reason
+        self.holding = False
+        self.slip_check = slip_check
+        self.executed: list[np.ndarray] = []     # TCP positions, one per physics step
+
+    def tick(self) -> None:
+        self.s.step()
+        self.seconds += self.s.timestep
+        self.executed.append(self.s.gripper.tcp_pose()[:3, 3])
+        detail = blown_up(self.s.velocities() + self.s.gripper.velocities())
+        if detail:
+            raise _Abort(BLOW_UP, detail)
+
+    def wait(self, seconds: float) -> None:
+        for _ in range(int(round(seconds / self.s.timestep))):
+            self.tick()
+
+    def follow(self, poses: Callable[[float], np.ndarray], seconds: float, check_stall: bool = True) -> None:
+        """Drive the TCP target along ``poses(u)``, u in [0, 1], over ``seconds``."""
+        n = max(1, int(round(seconds / self.s.timestep)))
+        for k in range(1, n + 1):
+            target = poses(_smooth(k / n))
+            self.s.gripper.set_target(target)
+            self.tick()
+            if self.holding and self.slip_check and self._slipped():
+                raise _Abort(SLIPPED, "the object left the gripper while moving")
+            if check_stall:
+                d, ang = _pose_distance(self.s.gripper.tcp_pose(), target)
+                if d > STALL_DISTANCE or ang > STALL_ANGLE:
+                    raise _Abort(self.stall_reason, f"hand {d * 100:.1f} cm / {np.degrees(ang):.0f} deg behind its target")
+
+    def line(self, a: np.ndarray, b: np.ndarray, check_stall: bool = True) -> None:
+        """Straight line and slerp from pose a to pose b."""
+        rots = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([a[:3, :3], b[:3, :3]])))
+
+        def pose(u: float) -> np.ndarray:
+            T = np.eye(4)
+            T[:3, :3] = rots(u).as_matrix()
+            T[:3, 3] = (1 - u) * a[:3, 3] + u * b[:3, 3]
+            return T
+
+        self.follow(pose, _segment_seconds(a, b), check_stall)
+
+    def _slipped(self) -> bool:
+        g = self.s.gripper
+        if self.s.grasp_mode == "suction":
+            if g.suction_stretch() > SUCTION_SLIP:
+                g.detach()
+                return True
+            return False
+        return g.opening < HELD_OPENING
+
+    def grasp(self, grasp: Grasp) -> None:
+        if self.s.grasp_mode == "suction":
+            return self._suction_grasp(grasp)
+        g = self.s.gripper
+        pre = grasp.tcp.copy()
+        pre[:3, 3] -= PREGRASP_DISTANCE * grasp.approach
+        g.teleport(pre)
+        self.line(pre, grasp.tcp, check_stall=False)
+        g.set_fingers(-0.02)
+        self.wait(CLOSE_SECONDS)
+        if g.opening < HELD_OPENING:
+            raise _Abort(GRASP_MISSED, "the fingers closed on nothing")
+        if g.opening > BLOCKED_OPENING:
+            raise _Abort(GRASP_MISSED, "the fingers could not close (nothing to pinch)")
+        self.holding = True
+
+    def _suction_grasp(self, grasp: Grasp) -> None:
+        g = self.s.gripper
+        pre = grasp.tcp.copy()
+        pre[:3, 3] -= PREGRASP_DISTANCE * grasp.approach
+        press = grasp.tcp.copy()
+        press[:3, 3] += SUCTION_PRESS * grasp.approach
+        g.teleport(pre, opening=0.0)
+        self.line(pre, press, check_stall=False)
+        self.wait(HOLD_SECONDS)
+        body = g.touched_body(self.s.ms_scene.px.get_contacts())
+        if body is None:
+            raise _Abort(GRASP_MISSED, "the suction cup touched nothing")
+        g.attach(self.s.ms_scene, body)
+        self.holding = True
+
+    def release(self, approach: np.ndarray) -> None:
+        g = self.s.gripper
+        self.holding = False
+        g.detach()
+        self.wait(HOLD_SECONDS)
+        g.set_fingers(2 * FINGER_OPEN)
+        self.wait(RELEASE_SECONDS)
+        now = g.tcp_pose()
+        back = now.copy()
+        back[:3, 3] -= RETREAT_DISTANCE * approach
+        self.line(now, back, check_stall=False)
+        g.park()
+
+
+def _finish(run: _Runner, result: ExecutionResult, extra: dict) -> ExecutionResult:
+    result.sim_seconds += run.seconds
+    result.details.update(extra)
+    result.details["executed_path"] = np.asarray(run.executed[::10]).round(4).tolist()
+    return result
+
+
+def _settle(scene: Scene) -> ExecutionResult:
+    return simulate_until_still(scene.step, scene.timestep, scene.velocities, scene.is_still)
+
+
+def execute_articulated_gripper(scene: Scene, action_points: np.ndarray, cross_pose: np.ndarray,
+                                free_joint: Callable[[], None], hold_joint: Callable[[], None]) -> ExecutionResult:
+    """Grasp the door or drawer, move it along the predicted screw, release, settle."""
+    run = _Runner(scene, STALLED_AGAINST_HINGE, slip_check=True)
+    choose = suction_point if scene.grasp_mode == "suction" else articulated_grasp
+    grasp = choose(action_points, cross_pose)
+    if grasp is None:   # the prediction moves nothing: the hand has nothing to do
+        return _finish(run, _settle(scene), {"grasp_point": None})
+    extra = {"grasp_point": grasp.tcp[:3, 3].round(4).tolist(), "grasp_width": grasp.width}
+    path = interpolate(cross_pose, np.linspace(0, 1, 11)) @ grasp.tcp
+    extra["planned_path"] = path[:, :3, 3].round(4).tolist()
+    try:
+        run.grasp(grasp)
+        free_joint()   # held by the hand from now on (until then the joint keeps its place)
+        seconds = _segment_seconds(np.eye(4), cross_pose, path_length(cross_pose, grasp.tcp[:3, 3]))
+        run.follow(lambda u: interpolate(cross_pose, u) @ grasp.tcp, seconds)
+        run.release(grasp.approach)
+    except _Abort as abort:
+        scene.gripper.detach()
+        scene.gripper.set_fingers(2 * FINGER_OPEN)
+        run.wait(RELEASE_SECONDS) if abort.reason != BLOW_UP else None
+        scene.gripper.park()
+        hold_joint()
+        settled = _settle(scene) if abort.reason != BLOW_UP else ExecutionResult(ok=False)
+        # A robot that stalled or slipped stops, lets go, and the scene is scored as it is.
+        result = ExecutionResult(ok=abort.reason != BLOW_UP, reason=abort.reason, detail=str(abort.detail),
+                                 sim_seconds=settled.sim_seconds, at_rest=settled.at_rest)
+        return _finish(run, result, extra)
+    hold_joint()
+    return _finish(run, _settle(scene), extra)
+
+
+def execute_free_gripper(scene: Scene, object_points: np.ndarray, cross_pose: np.ndarray) -> ExecutionResult:
+    """Pick the object from above, carry it over the predicted goal, lower it there, release, settle."""
+    run = _Runner(scene, COLLISION, slip_check=True)
+    grasp = top_suction_point(object_points) if scene.grasp_mode == "suction" else top_grasp(object_points)
+    if grasp is None:
+        return _finish(run, ExecutionResult(ok=False, reason=PLANNING_FAILED,
+                                            detail="the object is wider than the fingers open"), {"grasp_point": None})
+    start = grasp.tcp
+    goal = cross_pose @ start
+    lifted = start.copy()
+    above_goal = goal.copy()
+    travel_z = max(start[2, 3] + LIFT_HEIGHT, goal[2, 3] + CARRY_CLEARANCE)
+    lifted[2, 3] = travel_z
+    above_goal[2, 3] = travel_z
+    waypoints = [start, lifted, above_goal, goal]
+    extra = {"grasp_point": start[:3, 3].round(4).tolist(), "grasp_width": grasp.width,
+             "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints]}
+    try:
+        run.grasp(grasp)
+        for a, b in zip(waypoints[:-1], waypoints[1:]):
+            run.line(a, b)
+        run.release(grasp.approach)
+    except _Abort as abort:
+        scene.gripper.detach()
+        scene.gripper.set_fingers(2 * FINGER_OPEN)
+        scene.gripper.park()
+        settled = _settle(scene) if abort.reason != BLOW_UP else ExecutionResult(ok=False)
+        return _finish(run, ExecutionResult(ok=abort.reason != BLOW_UP, reason=abort.reason, detail=str(abort.detail),
+                                            sim_seconds=settled.sim_seconds, at_rest=settled.at_rest), extra)
+    return _finish(run, _settle(scene), extra)
