@@ -9,7 +9,12 @@ flag the caller's loader uses. The pieces come from
 
 * the dataset's own convex decomposition (``mobility_cvx.urdf`` and its
   ``cvx_objs/<link>.obj`` files, one ``o`` group per piece) when present, or
-* CoACD run once per link on the link's collision meshes otherwise.
+* CoACD run once per link on the link's collision meshes otherwise, each link in
+  a worker process of its own, several at once (``wpbench.assets.decompose``).
+
+A link whose decomposition gives nothing usable (a flat handle) or crashes gets a
+fallback (``wpbench.assets.collision_fallback``: its convex hull, a thin box, or no
+collision); :attr:`DerivedCollision.fallbacks` says which links and why.
 
 Visual meshes stay where they are: the derived URDF points at them by
 absolute path, so the (read-only) dataset folder is never modified or copied.
@@ -18,11 +23,12 @@ Cache layout (``cache_dir``, outside the dataset)::
 
     cache_dir/
         pieces/<link>-<fingerprint>/piece_000.obj ...   # one directory per link
-        pieces/<link>-<fingerprint>/timing.json          # CoACD seconds for that link
+        pieces/<link>-<fingerprint>/timing.json          # seconds, source, fallback of that link
         mobility_wpbench-<fingerprint>.urdf              # the derived URDF
 
 Every directory and file is written to a temporary name and renamed into
-place, so an interrupted run leaves no half-written entry; the fingerprint
+place, so an interrupted run leaves no half-written entry and two processes
+preparing the same object at once end with one complete entry; the fingerprint
 (hash of the source meshes, transforms and CoACD parameters) makes a changed
 source or parameter set produce a fresh entry instead of reusing a stale one.
 """
@@ -34,39 +40,34 @@ import json
 import os
 import shutil
 import tempfile
-import time
 import xml.etree.ElementTree as ET
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
+from wpbench.assets.collision_fallback import fallback_pieces
+from wpbench.assets.decompose import (
+    CoacdConfig,
+    LinkJob,
+    convex_pieces_from_vertices,
+    entry_is_complete,
+    entry_piece_files,
+    read_entry,
+    run_jobs,
+    save_mesh,
+    write_entry,
+)
+
 DERIVED_URDF_PREFIX = "mobility_wpbench"
+
+__all__ = ["CoacdConfig", "CollisionBuildError", "CollisionPlan", "DerivedCollision", "build_hollow_collision_urdf",
+           "plan_collision", "finish_collision"]
 
 
 class CollisionBuildError(ValueError):
     """The collision geometry of an object could not be built (bad mesh, bad URDF)."""
-
-
-@dataclass(frozen=True)
-class CoacdConfig:
-    """CoACD parameters. Modest on purpose: a 2-core machine takes 35-60 s per body.
-
-    threshold: concavity tolerance (fraction of the mesh size); 0.05-0.1 keeps
-        thin walls as separate pieces while keeping the piece count low.
-    max_convex_hull: cap on pieces per link (-1 = no cap).
-    preprocess_resolution: voxel resolution of the manifold pre-pass.
-    mcts_iterations / mcts_nodes: search effort per cut.
-    seed: CoACD's random seed, for reproducible pieces.
-    """
-
-    threshold: float = 0.08
-    max_convex_hull: int = 48
-    preprocess_resolution: int = 50
-    mcts_iterations: int = 100
-    mcts_nodes: int = 15
-    seed: int = 0
 
 
 @dataclass(frozen=True)
@@ -75,15 +76,20 @@ class DerivedCollision:
 
     urdf: derived URDF (absolute visual paths, one convex piece per collision).
     source: "dataset-cvx" (mobility_cvx.urdf pieces) or "coacd".
-    coacd_seconds: CoACD time per link measured when the pieces were first
+    coacd_seconds: decomposition time per link measured when the pieces were first
         computed (read back from the cache on later calls); empty for "dataset-cvx".
     computed_now: links whose pieces were computed in this call (cache misses).
+    fallbacks: {link: "thin box: <why>"} for links that got a fallback instead of
+        decomposed pieces (see ``wpbench.assets.collision_fallback``).
+    links_without_collision: links left with no collision piece at all.
     """
 
     urdf: Path
     source: str
     coacd_seconds: dict[str, float]
     computed_now: tuple[str, ...]
+    fallbacks: dict[str, str] = field(default_factory=dict)
+    links_without_collision: tuple[str, ...] = ()
 
 
 # --------------------------------------------------------------------------- URDF helpers
@@ -197,60 +203,7 @@ def _write_atomic(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
-def _write_pieces_atomic(target_dir: Path, pieces: list[trimesh.Trimesh], info: dict) -> None:
-    """Write convex pieces (and an info JSON) into ``target_dir`` all at once via a temporary directory."""
-    target_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp_dir = Path(tempfile.mkdtemp(dir=target_dir.parent, prefix=f".{target_dir.name}.", suffix=".tmp"))
-    try:
-        for i, piece in enumerate(pieces):
-            piece.export(tmp_dir / f"piece_{i:03d}.obj")
-        (tmp_dir / "timing.json").write_text(json.dumps(info, indent=2) + "\n")
-        try:
-            os.rename(tmp_dir, target_dir)
-        except OSError:
-            # Another process finished the same entry first; its result is equivalent.
-            if not (target_dir / "timing.json").is_file():
-                raise
-            shutil.rmtree(tmp_dir, ignore_errors=True)
-    except BaseException:
-        shutil.rmtree(tmp_dir, ignore_errors=True)
-        raise
-
-
-def _piece_files(piece_dir: Path) -> list[Path]:
-    return sorted(piece_dir.glob("piece_*.obj"))
-
-
-def _convex_pieces_from_vertices(groups: list[np.ndarray]) -> list[trimesh.Trimesh]:
-    pieces = []
-    for vertices in groups:
-        try:
-            hull = trimesh.convex.convex_hull(vertices)
-        except Exception:  # degenerate (flat) group: PhysX cannot use it either
-            continue
-        if hull.volume > 1e-12:
-            pieces.append(hull)
-    return pieces
-
-
-def run_coacd(mesh: trimesh.Trimesh, config: CoacdConfig) -> list[trimesh.Trimesh]:
-    """Convex pieces of ``mesh`` from CoACD (each piece a convex hull, link frame)."""
-    import coacd  # heavy import; only needed on a cache miss
-
-    coacd.set_log_level("error")
-    parts = coacd.run_coacd(
-        coacd.Mesh(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)),
-        threshold=config.threshold,
-        max_convex_hull=config.max_convex_hull,
-        preprocess_resolution=config.preprocess_resolution,
-        mcts_iterations=config.mcts_iterations,
-        mcts_nodes=config.mcts_nodes,
-        seed=config.seed,
-    )
-    return _convex_pieces_from_vertices([np.asarray(v) for v, _f in parts])
-
-
-# --------------------------------------------------------------------------- main entry point
+# --------------------------------------------------------------------------- visual meshes
 
 
 def _visual_with_existing_textures(obj_path: Path, cache_dir: Path) -> Path:
@@ -283,13 +236,51 @@ def _visual_with_existing_textures(obj_path: Path, cache_dir: Path) -> Path:
     return target
 
 
-def build_hollow_collision_urdf(
-    folder: Path, cache_dir: Path, coacd_config: CoacdConfig | None = None
-) -> DerivedCollision:
-    """Write (or reuse) the derived URDF of a PartNet-Mobility folder; see the module docstring.
+def _visual_paths_into(root: ET.Element, source_dir: Path, cache_dir: Path) -> None:
+    """Visual meshes: absolute paths into the dataset folder, which stays untouched; a mesh
+    whose material names a texture image the folder lacks gets a cached copy without it
+    (the renderer aborts on a missing texture file)."""
+    for mesh_el in root.iter("mesh"):
+        filename = mesh_el.get("filename", "")
+        if not Path(filename).is_absolute():
+            path = (source_dir / filename).resolve()
+            mesh_el.set("filename", str(_visual_with_existing_textures(path, cache_dir / "visuals")))
 
-    Raises CollisionBuildError with a message saying what to fix when the URDF
-    or a mesh is unreadable.
+
+@dataclass
+class CollisionPlan:
+    """What building one object's derived URDF needs: its source tree, the cache entry
+    of each link with collisions, and the decompositions still to run (``jobs``).
+
+    Made by :func:`plan_collision`; run the jobs (``wpbench.assets.decompose.run_jobs``,
+    possibly together with other objects' jobs), then :func:`finish_collision`.
+    """
+
+    folder: Path
+    cache_dir: Path
+    source_urdf: Path
+    tree: ET.ElementTree
+    use_dataset_cvx: bool
+    config: CoacdConfig
+    entries: dict[str, Path]  # link name -> cache entry
+    jobs: list[LinkJob]
+    computed_now: list[str]
+    scratch: Path | None = None  # holds the jobs' mesh files until finish_collision
+
+    def cleanup(self) -> None:
+        if self.scratch is not None:
+            shutil.rmtree(self.scratch, ignore_errors=True)
+            self.scratch = None
+
+
+def plan_collision(folder: Path, cache_dir: Path, coacd_config: CoacdConfig | None = None,
+                   decomposer: str | None = None) -> CollisionPlan:
+    """Read ``folder``'s URDF, find each link's cache entry, and list the decompositions
+    missing from the cache (the dataset's own convex pieces are written at once).
+
+    ``decomposer``: "module:function" run by the workers instead of CoACD.
+    Raises CollisionBuildError with a message saying what to fix when the URDF or a mesh
+    is unreadable.
     """
     folder = Path(folder).resolve()
     cache_dir = Path(cache_dir)
@@ -301,78 +292,133 @@ def build_hollow_collision_urdf(
     root = tree.getroot()
     if root.tag != "robot":
         raise CollisionBuildError(f"{source_urdf} has root <{root.tag}>, expected <robot>; restore the file.")
-    # Collision meshes of the plain URDF feed CoACD; in the cvx case they are the cvx_objs files.
-    coacd_seconds: dict[str, float] = {}
-    computed_now: list[str] = []
-    fingerprints: list[bytes] = [source_urdf.read_bytes(), json.dumps(asdict(config)).encode()]
+    plan = CollisionPlan(folder=folder, cache_dir=cache_dir, source_urdf=source_urdf, tree=tree,
+                         use_dataset_cvx=use_dataset_cvx, config=config, entries={}, jobs=[], computed_now=[])
+    try:
+        for link in root.findall("link"):
+            name = link.get("name", "")
+            collisions = [c for c in link.findall("collision") if c.find("geometry/mesh") is not None]
+            if not link.findall("collision"):
+                continue
+            if use_dataset_cvx:
+                files = [source_urdf.parent / c.find("geometry/mesh").get("filename", "") for c in collisions]
+                origins = [origin_matrix(c.find("origin")) for c in collisions]
+                key = _fingerprint(*(f.read_bytes() if f.is_file() else b"missing" for f in files),
+                                   *(o.tobytes() for o in origins))
+            else:
+                files = [folder / c.find("geometry/mesh").get("filename", "") for c in collisions]
+                key = _fingerprint(
+                    ET.tostring(link), *(f.read_bytes() if f.is_file() else b"missing" for f in files),
+                    json.dumps(asdict(config)).encode(),
+                )
+            entry = cache_dir / "pieces" / f"{name}-{key}"
+            plan.entries[name] = entry
+            if entry_is_complete(entry):
+                continue
+            plan.computed_now.append(name)
+            if use_dataset_cvx:
+                _write_dataset_cvx_entry(entry, name, files, origins, config)
+                continue
+            mesh = link_collision_mesh(link, folder)
+            if mesh is None:
+                write_entry(entry, [], {"link": name, "seconds": 0.0, "source": "fallback",
+                                        "fallback": "no collision", "reason": "the link names no collision mesh",
+                                        "coacd": asdict(config)})
+                continue
+            if plan.scratch is None:
+                cache_dir.mkdir(parents=True, exist_ok=True)
+                plan.scratch = Path(tempfile.mkdtemp(dir=cache_dir, prefix=".meshes-"))
+            mesh_file = plan.scratch / f"{len(plan.jobs):03d}.npz"
+            save_mesh(mesh, mesh_file)
+            job = LinkJob(label=f"{folder.name}/{name}", link=name, mesh_file=mesh_file, entry=entry, config=config)
+            if decomposer is not None:
+                job = LinkJob(**{**job.__dict__, "decomposer": decomposer})
+            plan.jobs.append(job)
+    except BaseException:
+        plan.cleanup()
+        raise
+    return plan
 
+
+def _write_dataset_cvx_entry(entry: Path, name: str, files: list[Path], origins: list[np.ndarray],
+                             config: CoacdConfig) -> None:
+    pieces: list[trimesh.Trimesh] = []
+    all_vertices = []
+    for f, origin in zip(files, origins):
+        groups = split_obj_groups(f)
+        all_vertices += [g @ origin[:3, :3].T + origin[:3, 3] for g in groups]
+        for piece in convex_pieces_from_vertices(groups):
+            piece.apply_transform(origin)
+            pieces.append(piece)
+    info = {"link": name, "seconds": 0.0, "source": "dataset-cvx", "coacd": asdict(config)}
+    if not pieces:
+        vertices = np.concatenate(all_vertices) if all_vertices else np.zeros((0, 3))
+        pieces, kind = fallback_pieces(vertices)
+        info.update(source="fallback", fallback=kind, reason="the dataset's convex pieces have no volume")
+    write_entry(entry, pieces, info)
+
+
+def finish_collision(plan: CollisionPlan) -> DerivedCollision:
+    """Write (or reuse) the derived URDF once every link of ``plan`` has its cache entry."""
+    plan.cleanup()
+    root = plan.tree.getroot()
+    coacd_seconds: dict[str, float] = {}
+    fallbacks: dict[str, str] = {}
+    without: list[str] = []
+    fingerprints: list[bytes] = [plan.source_urdf.read_bytes(), json.dumps(asdict(plan.config)).encode()]
     for link in root.findall("link"):
         name = link.get("name", "")
-        collisions = link.findall("collision")
-        if not collisions:
+        if name not in plan.entries:
             continue
-        if use_dataset_cvx:
-            files = [source_urdf.parent / c.find("geometry/mesh").get("filename", "") for c in collisions
-                     if c.find("geometry/mesh") is not None]
-            origins = [origin_matrix(c.find("origin")) for c in collisions if c.find("geometry/mesh") is not None]
-            key = _fingerprint(*(f.read_bytes() if f.is_file() else b"missing" for f in files),
-                               *(o.tobytes() for o in origins))
-        else:
-            files = [folder / c.find("geometry/mesh").get("filename", "") for c in collisions
-                     if c.find("geometry/mesh") is not None]
-            key = _fingerprint(
-                ET.tostring(link), *(f.read_bytes() if f.is_file() else b"missing" for f in files),
-                json.dumps(asdict(config)).encode(),
-            )
-        piece_dir = cache_dir / "pieces" / f"{name}-{key}"
-        if not (piece_dir / "timing.json").is_file():
-            start = time.perf_counter()
-            if use_dataset_cvx:
-                pieces: list[trimesh.Trimesh] = []
-                for f, origin in zip(files, origins):
-                    for piece in _convex_pieces_from_vertices(split_obj_groups(f)):
-                        piece.apply_transform(origin)
-                        pieces.append(piece)
-            else:
-                mesh = link_collision_mesh(link, folder)
-                pieces = run_coacd(mesh, config) if mesh is not None else []
-            seconds = time.perf_counter() - start
-            if not pieces:
-                raise CollisionBuildError(
-                    f"no usable convex piece for link {name!r} of {folder}; its collision meshes are degenerate."
-                )
-            _write_pieces_atomic(piece_dir, pieces, {"link": name, "seconds": seconds,
-                                                     "source": "dataset-cvx" if use_dataset_cvx else "coacd",
-                                                     "coacd": asdict(config), "pieces": len(pieces)})
-            computed_now.append(name)
-        info = json.loads((piece_dir / "timing.json").read_text())
-        if not use_dataset_cvx:
+        entry = plan.entries[name]
+        if not entry_is_complete(entry):
+            raise CollisionBuildError(f"link {name!r} of {plan.folder} has no collision pieces yet; "
+                                      "run its decomposition first (wpbench assets prepare).")
+        info = read_entry(entry)
+        if not plan.use_dataset_cvx:
             coacd_seconds[name] = float(info["seconds"])
-        fingerprints.append(piece_dir.name.encode())
+        if info.get("source") == "fallback":
+            fallbacks[name] = f"{info['fallback']}: {info['reason']}"
+        fingerprints.append(entry.name.encode())
         # Replace the link's collisions by one element per convex piece (pieces are in the link frame).
-        for c in collisions:
+        for c in link.findall("collision"):
             link.remove(c)
-        for piece_file in _piece_files(piece_dir):
+        files = entry_piece_files(entry)
+        if not files:
+            without.append(name)
+        for piece_file in files:
             collision = ET.SubElement(link, "collision")
             ET.SubElement(ET.SubElement(collision, "geometry"), "mesh", filename=str(piece_file.resolve()))
-
-    # Visual meshes: absolute paths into the dataset folder, which stays untouched; a mesh
-    # whose material names a texture image the folder lacks gets a cached copy without it
-    # (the renderer aborts on a missing texture file).
-    for mesh_el in root.iter("mesh"):
-        filename = mesh_el.get("filename", "")
-        if not Path(filename).is_absolute():
-            path = (source_urdf.parent / filename).resolve()
-            mesh_el.set("filename", str(_visual_with_existing_textures(path, cache_dir / "visuals")))
-
-    ET.indent(tree)
+    _visual_paths_into(root, plan.source_urdf.parent, plan.cache_dir)
+    ET.indent(plan.tree)
     text = ET.tostring(root, encoding="unicode")
-    urdf_path = cache_dir / f"{DERIVED_URDF_PREFIX}-{_fingerprint(*fingerprints)}.urdf"
+    urdf_path = plan.cache_dir / f"{DERIVED_URDF_PREFIX}-{_fingerprint(*fingerprints)}.urdf"
     if not urdf_path.is_file() or urdf_path.read_text() != text:
         _write_atomic(urdf_path, text)
     return DerivedCollision(
         urdf=urdf_path,
-        source="dataset-cvx" if use_dataset_cvx else "coacd",
+        source="dataset-cvx" if plan.use_dataset_cvx else "coacd",
         coacd_seconds=coacd_seconds,
-        computed_now=tuple(computed_now),
+        computed_now=tuple(plan.computed_now),
+        fallbacks=fallbacks,
+        links_without_collision=tuple(without),
     )
+
+
+def build_hollow_collision_urdf(
+    folder: Path, cache_dir: Path, coacd_config: CoacdConfig | None = None, workers: int | None = None,
+    progress: bool = False, decomposer: str | None = None,
+) -> DerivedCollision:
+    """Write (or reuse) the derived URDF of a PartNet-Mobility folder; see the module docstring.
+
+    Missing decompositions run in up to ``workers`` worker processes (default: one per
+    core), with a progress bar naming the links when ``progress``.
+    Raises CollisionBuildError with a message saying what to fix when the URDF
+    or a mesh is unreadable.
+    """
+    plan = plan_collision(folder, cache_dir, coacd_config, decomposer=decomposer)
+    try:
+        run_jobs(plan.jobs, workers=workers, progress=progress, desc=f"decomposing {Path(folder).name}")
+    finally:
+        plan.cleanup()
+    return finish_collision(plan)

@@ -16,7 +16,10 @@ per link: ``link_name joint_kind label``, e.g. ``link_0 hinge door``),
    the open one sticks out (PartNet-Mobility is usually closed at the lower
    limit, but nothing guarantees it);
 3. builds hollow collision geometry (``wpbench.assets.collision``: the
-   dataset's convex pieces or CoACD, cached outside the dataset);
+   dataset's convex pieces or CoACD, cached outside the dataset); a small link
+   whose decomposition fails gets a fallback (its convex hull, a thin box, or no
+   collision), recorded in ``extra["collision_fallbacks"]``; the object is
+   refused only when the target part or the cavity cannot be built;
 4. scales the object to a realistic size for its category
    (:data:`CATEGORY_TYPICAL_SIZE_M`, the largest side of the closed object),
    unless the caller overrides the loader scale;
@@ -42,6 +45,7 @@ import numpy as np
 
 from wpbench.assets.cavity import CavityConfig, door_cavity, drawer_inner_volume
 from wpbench.assets.collision import CoacdConfig, CollisionBuildError, build_hollow_collision_urdf
+from wpbench.assets.collision_fallback import CONVEX_HULL
 from wpbench.assets.reach import reachable_open_qpos
 from wpbench.assets.spec import FurnitureAsset
 
@@ -90,6 +94,11 @@ class PartNetLoadConfig:
     probe_reach: bool = True
     # Refuse targets that physics lets open less than this fraction of their range.
     min_reach_fraction: float = 0.5
+    # Decomposition worker processes (None: one per core) and whether to show their progress bar.
+    workers: int | None = None
+    progress: bool = False
+    # "module:function" that decomposes a link instead of CoACD (see wpbench.assets.decompose).
+    decomposer: str | None = None
 
 
 @dataclass(frozen=True)
@@ -309,6 +318,47 @@ def _closed_area(pts: np.ndarray) -> float:
 # --------------------------------------------------------------------------- public API
 
 
+@dataclass(frozen=True)
+class ObjectDescription:
+    """What a folder's text files say: its movable links, its category, and the
+    door/drawer links that may be the target (largest first is chosen later)."""
+
+    movables: list[_Movable]
+    candidates: list[_Movable]
+    raw_category: str
+    category: str
+
+
+def describe_object(folder: Path, target_link: str | None = None) -> ObjectDescription:
+    """Read ``folder``'s semantics.txt, mobility.urdf and meta.json (no meshes, no physics).
+
+    Raises PartNetLoadError when the folder is not a usable object (missing files, no
+    door or drawer), with a one-line message saying what to do.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise PartNetLoadError(f"{folder} is not a directory; pass a PartNet-Mobility object folder.")
+    object_id = folder.name
+    semantics = _read_semantics(folder)
+    movables = _read_movables(folder, semantics)
+    raw_category = _read_category(folder, semantics)
+    candidates = [m for m in movables if m.is_door] or [m for m in movables if m.is_drawer]
+    if target_link is not None:
+        candidates = [m for m in movables if m.link == target_link and (m.is_door or m.is_drawer)]
+        if not candidates:
+            raise PartNetLoadError(
+                f"{object_id}: link {target_link!r} is not a door or drawer; choose one of "
+                f"{[m.link for m in movables if m.is_door or m.is_drawer]}."
+            )
+    if not candidates:
+        raise PartNetLoadError(
+            f"{object_id}: semantics.txt names no door ('hinge ...door' on a limited revolute joint) and no "
+            f"drawer ('slider drawer' on a prismatic joint); movable links are "
+            f"{[(m.link, m.semantic_kind, m.label) for m in movables]}. Use an object with a door or drawer."
+        )
+    return ObjectDescription(movables, candidates, raw_category, normalise_category(raw_category))
+
+
 def load_partnet_object(
     folder: Path,
     cache_dir: Path | None = None,
@@ -331,38 +381,37 @@ def load_partnet_object(
         PartNetLoadError: the folder is incomplete or has no usable door/drawer/cavity.
     """
     folder = Path(folder)
-    if not folder.is_dir():
-        raise PartNetLoadError(f"{folder} is not a directory; pass a PartNet-Mobility object folder.")
     object_id = folder.name
-    semantics = _read_semantics(folder)
-    movables = _read_movables(folder, semantics)
-    raw_category = _read_category(folder, semantics)
-    category = normalise_category(raw_category)
-    candidates = [m for m in movables if m.is_door] or [m for m in movables if m.is_drawer]
-    if target_link is not None:
-        candidates = [m for m in movables if m.link == target_link and (m.is_door or m.is_drawer)]
-        if not candidates:
-            raise PartNetLoadError(
-                f"{object_id}: link {target_link!r} is not a door or drawer; choose one of "
-                f"{[m.link for m in movables if m.is_door or m.is_drawer]}."
-            )
-    if not candidates:
-        raise PartNetLoadError(
-            f"{object_id}: semantics.txt names no door ('hinge ...door' on a limited revolute joint) and no "
-            f"drawer ('slider drawer' on a prismatic joint); movable links are "
-            f"{[(m.link, m.semantic_kind, m.label) for m in movables]}. Use an object with a door or drawer."
-        )
+    described = describe_object(folder, target_link)
+    movables, candidates = described.movables, described.candidates
+    raw_category, category = described.raw_category, described.category
 
     try:
-        derived = build_hollow_collision_urdf(folder, cache_dir or default_cache_dir(object_id), config.coacd)
+        derived = build_hollow_collision_urdf(folder, cache_dir or default_cache_dir(object_id), config.coacd,
+                                              workers=config.workers, progress=config.progress,
+                                              decomposer=config.decomposer)
     except CollisionBuildError as err:
         raise PartNetLoadError(f"{object_id}: {err}") from err
+    buildable = [m for m in candidates if m.link not in derived.links_without_collision]
+    if not buildable:
+        links = [m.link for m in candidates]
+        raise PartNetLoadError(
+            f"{object_id}: the door/drawer link(s) {links} have no collision geometry "
+            f"({'; '.join(derived.fallbacks.get(link, 'no mesh') for link in links)}); the target part cannot be "
+            "built: restore its meshes from the download or pick another object."
+        )
+    candidates = buildable
 
     # Pass 1 at scale 1: which end of each door/drawer is closed, and how big the object is.
     scene, articulation = load_collision_articulation(derived.urdf, 1.0)
     posed = _Posed(articulation)
     base = {m.joint: _rest_value(m) for m in movables}
     all_links = [name for name, link in posed.links.items() if link.get_collision_shapes()]
+    if not [n for n in all_links if n not in {m.link for m in candidates}]:
+        raise PartNetLoadError(
+            f"{object_id}: only the door/drawer links have collision geometry, the body has none (its meshes "
+            "are missing or empty), so there is no cavity; restore the body's meshes from the download."
+        )
     ends = {}
     for m in movables:
         if m.is_door or m.is_drawer:
@@ -426,10 +475,13 @@ def load_partnet_object(
     posed.set(closed_values)
     if region is None or min(region.half_extents) < MIN_REGION_HALF_EXTENT_M:
         size = None if region is None else [round(2 * h, 3) for h in region.half_extents]
+        hulls = [link for link, why in derived.fallbacks.items() if link in anchor_links and why.startswith(CONVEX_HULL)]
+        cause = (f"link(s) {hulls} stand in as their convex hull ({'; '.join(derived.fallbacks[h] for h in hulls)}), "
+                 "which fills the cavity" if hulls else "the collision pieces may fill it")
         raise PartNetLoadError(
             f"{object_id}: found no free cavity behind {target.link} big enough for an object (size {size} m); "
-            "the collision pieces may fill it: delete the cache directory "
-            f"{derived.urdf.parent} and lower CoacdConfig.threshold, or pick another target_link."
+            f"{cause}: delete the cache directory {derived.urdf.parent} and lower CoacdConfig.threshold, "
+            "or pick another target_link."
         )
     if target.is_door:
         door_inner_face = float((door_closed @ front).min())
@@ -473,6 +525,8 @@ def load_partnet_object(
             "closed_qpos_by_joint": {k: float(v) for k, v in closed_values.items()},
             "collision_source": derived.source,
             "coacd_seconds": derived.coacd_seconds,
+            "collision_fallbacks": dict(derived.fallbacks),
+            "links_without_collision": list(derived.links_without_collision),
             "in_region_state": region_state,
             "open_qpos_limit": float(open_q),  # the URDF limit; open_qpos is what physics reaches
             "target_label": target.label,
@@ -480,7 +534,8 @@ def load_partnet_object(
     )
 
 
-def _object_folders(root: Path) -> list[Path]:
+def object_folders(root: Path) -> list[Path]:
+    """The object folders under ``root`` (or ``root`` itself when it is one object), sorted by name."""
     if (root / "mobility.urdf").is_file() or (root / "semantics.txt").is_file():
         return [root]
     return sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))
@@ -509,7 +564,7 @@ def load_partnet_folder(
         raise PartNetLoadError(f"{root} is not a directory; pass the folder that holds PartNet-Mobility objects.")
     assets: list[FurnitureAsset] = []
     failures: dict[str, str] = {}
-    for folder in _object_folders(root):
+    for folder in object_folders(root):
         try:
             assets.append(
                 load_partnet_object(
@@ -523,8 +578,8 @@ def load_partnet_folder(
             failures[folder.name] = str(err)
         except Exception as err:  # one broken object must not stop the rest
             failures[folder.name] = (
-                f"{folder.name}: unexpected {type(err).__name__}: {err}. Check that the folder is a complete "
-                "PartNet-Mobility object (mobility.urdf, semantics.txt, textured_objs/)."
+                f"{folder.name}: unexpected {type(err).__name__}: {' '.join(str(err).split())}. Check that the "
+                "folder is a complete PartNet-Mobility object (mobility.urdf, semantics.txt, meta.json, textured_objs/)."
             )
     return assets, failures
 
