@@ -507,7 +507,8 @@ class CrossPoseEnv(BaseEnv):
                                           np.asarray(body.entity_pose.p)],
                       is_still=lambda: np.linalg.norm(body.linear_velocity) < BODY_STILL_LIN
                       and np.linalg.norm(body.angular_velocity) < BODY_STILL_ANG)
-        return execute_free_gripper(scene, action, T)
+        anchor = self.get_obs()["anchor_points"][0].numpy().astype(np.float64)
+        return execute_free_gripper(scene, action, anchor, T)
 
     def _score_stage(self, state: StageState, T_pred: np.ndarray, result) -> dict[str, Any]:
         from wpbench.geometry import metrics as gm

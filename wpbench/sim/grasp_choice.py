@@ -152,3 +152,36 @@ def top_grasp(object_points: np.ndarray) -> Grasp | None:
     close_dir = np.array([axes[k][0], axes[k][1], 0.0])
     down = np.array([0.0, 0.0, -1.0])
     return Grasp(_frame(down, close_dir, centre), down, extents[k])
+
+
+CARRY_MARGIN = 0.02        # m: the carried object and hand keep this far from the observed anchor
+HAND_HEIGHT = 0.16         # m: the hand reaches this far above the top of what it carries from above
+MAX_CARRY_RISE = 0.4       # m: the highest carry considered above the goal
+CARRY_STEP = 0.01          # m
+
+
+def carry_height(object_points: np.ndarray, anchor_points: np.ndarray, start: np.ndarray, goal: np.ndarray) -> float | None:
+    """The lowest rise (m) above the goal at which an object, carried from above in a
+    straight line from over ``start`` (3,) to over ``goal`` (3,) (its positions at the
+    grasp), clears every observed anchor point; None when no rise up to MAX_CARRY_RISE does.
+
+    The swept volume is the object's horizontal radius plus CARRY_MARGIN around the path,
+    from the object's bottom minus the margin to its top plus HAND_HEIGHT.
+    """
+    obj = _check_cloud(object_points, "object_points")
+    anchor = _check_cloud(anchor_points, "anchor_points")
+    below = start[2] - obj[:, 2].min()
+    above = obj[:, 2].max() - start[2]
+    centre = (obj[:, :2].min(0) + obj[:, :2].max(0)) / 2
+    radius = float(np.linalg.norm(obj[:, :2] - centre, axis=1).max()) + CARRY_MARGIN
+    a, b = np.asarray(start[:2], float), np.asarray(goal[:2], float)
+    ab = b - a
+    u = np.clip(((anchor[:, :2] - a) @ ab) / max(ab @ ab, 1e-12), 0.0, 1.0)
+    near = np.linalg.norm(anchor[:, :2] - (a + u[:, None] * ab), axis=1) < radius
+    z = anchor[near, 2]
+    for rise in np.arange(0.0, MAX_CARRY_RISE + 1e-9, CARRY_STEP):
+        level = goal[2] + rise
+        lo, hi = level - below - CARRY_MARGIN, level + above + HAND_HEIGHT
+        if not np.any((z > lo) & (z < hi)):
+            return float(rise)
+    return None

@@ -9,8 +9,8 @@ nothing else. Physics decides the outcome:
   slide) with bounded force and speed, release, retreat, and let the scene settle.
   The joint is free while the hand moves it; a wrong axis pulls against the hinge and
   the hand stalls or the part slips out of the fingers.
-- Free-floating: grasp the object from above, lift it, carry it at the predicted
-  goal's height plus a clearance to above the goal, lower it to the predicted pose,
+- Free-floating: grasp the object from above, lift it, carry it at the lowest height
+  above the predicted goal that clears the observed anchor cloud to above the goal, lower it to the predicted pose,
   release, retreat and settle. The furniture collides with hand and object all the way.
 
 When the hand misses, stalls, slips or collides it stops, lets go, and the scene is
@@ -28,7 +28,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from wpbench.sim.executor import ExecutionResult, blown_up, simulate_until_still
 from wpbench.sim.failure import BLOW_UP, COLLISION, GRASP_MISSED, PLANNING_FAILED, SLIPPED, STALLED_AGAINST_HINGE
-from wpbench.sim.grasp_choice import Grasp, articulated_grasp, suction_point, top_grasp, top_suction_point
+from wpbench.sim.grasp_choice import Grasp, articulated_grasp, carry_height, suction_point, top_grasp, top_suction_point
 from wpbench.sim.gripper import FINGER_OPEN, FloatingGripper
 from wpbench.sim.screw_path import interpolate, path_length
 
@@ -230,7 +230,8 @@ def execute_articulated_gripper(scene: Scene, action_points: np.ndarray, cross_p
     return _finish(run, _settle(scene), extra)
 
 
-def execute_free_gripper(scene: Scene, object_points: np.ndarray, cross_pose: np.ndarray) -> ExecutionResult:
+def execute_free_gripper(scene: Scene, object_points: np.ndarray, anchor_points: np.ndarray,
+                         cross_pose: np.ndarray) -> ExecutionResult:
     """Pick the object from above, carry it over the predicted goal, lower it there, release, settle."""
     run = _Runner(scene, COLLISION, slip_check=True)
     grasp = top_suction_point(object_points) if scene.grasp_mode == "suction" else top_grasp(object_points)
@@ -239,9 +240,13 @@ def execute_free_gripper(scene: Scene, object_points: np.ndarray, cross_pose: np
                                             detail="the object is wider than the fingers open"), {"grasp_point": None})
     start = grasp.tcp
     goal = cross_pose @ start
+    rise = carry_height(object_points, anchor_points, start[:3, 3], goal[:3, 3])
+    if rise is None:
+        return _finish(run, ExecutionResult(ok=False, reason=PLANNING_FAILED,
+                                            detail="no carry height clears the observed furniture"), {"grasp_point": None})
     lifted = start.copy()
     above_goal = goal.copy()
-    travel_z = max(start[2, 3] + LIFT_HEIGHT, goal[2, 3] + CARRY_CLEARANCE)
+    travel_z = max(start[2, 3] + LIFT_HEIGHT, goal[2, 3] + max(CARRY_CLEARANCE, rise))
     lifted[2, 3] = travel_z
     above_goal[2, 3] = travel_z
     waypoints = [start, lifted, above_goal, goal]
