@@ -128,6 +128,19 @@ def test_wpbench_train_promote_as_a_command(wpbench_exe, runs, tmp_path):
                                                  text=True).stdout
 
 
+def test_wpbench_train_select_best_still_chooses_wp(wpbench_exe, runs, tmp_path):
+    root = tmp_path / "weights"
+    select = [str(wpbench_exe), "train", "--select-best", "--weights-root", str(root)]
+    weights.promote(runs / "gf", root)
+    none = subprocess.run(select, capture_output=True, text=True)
+    assert none.returncode == 2 and "no trained WeightedPose variant" in none.stderr
+    weights.promote(runs / "wp-postsvd", root)
+    (root / "best.json").unlink()
+    chosen = subprocess.run(select, capture_output=True, text=True)
+    assert chosen.returncode == 0, chosen.stderr
+    assert json.loads((root / "best.json").read_text())["policy"] == "wp-postsvd"
+
+
 def _break_metrics(run: Path, change) -> None:
     path = run / weights.METRICS_FILE
     metrics = json.loads(path.read_text())

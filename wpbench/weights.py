@@ -27,9 +27,7 @@ import math
 import os
 import shutil
 from pathlib import Path
-from typing import Any
-
-import torch
+from typing import TYPE_CHECKING, Any
 
 from wpbench.names import TRAINABLE_POLICIES, WEIGHTED_POSE_VARIANTS
 
@@ -47,6 +45,9 @@ FALLBACK_WEIGHTED_POSE = "wp-postsvd-t"
 # The validation numbers a promoted run must have, finite, for every kind.
 VALIDATION_ERRORS = ("rot_deg", "trans_m", "point_m")
 HASH_CHARS = 16
+
+if TYPE_CHECKING:  # torch is imported where tensors are handled, so reading best.json stays light
+    import torch
 
 
 def shipped_weights_root() -> Path:
@@ -74,6 +75,8 @@ def atomic_write_text(path: Path, text: str) -> None:
 
 def atomic_torch_save(obj: Any, path: Path) -> None:
     """``torch.save`` through a temporary file (see :func:`atomic_write_text`)."""
+    import torch
+
     path = Path(path)
     tmp = path.with_name(path.name + f".tmp{os.getpid()}")
     torch.save(obj, tmp)
@@ -95,6 +98,8 @@ def model_hash(state: dict[str, torch.Tensor]) -> str:
 def save_trained(out: Path, model: torch.nn.Module, description: dict, metrics: dict) -> None:
     """Write model.pt (float32 state_dict), config.json (``description`` + format + model_hash) and
     metrics.json into ``out``."""
+    import torch
+
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     state = {k: v.detach().to(torch.float32).contiguous().clone() if v.is_floating_point() else v.detach().clone()
@@ -129,6 +134,8 @@ def read_config(weights_dir: Path, policy: str | None = None) -> dict:
 
 def load_state(weights_dir: Path, policy: str | None = None) -> dict[str, torch.Tensor]:
     """``model.pt`` of a trained policy as a state_dict."""
+    import torch
+
     weights_dir = Path(weights_dir)
     policy = policy or weights_dir.name
     path = weights_dir / MODEL_FILE
