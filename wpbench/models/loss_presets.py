@@ -44,7 +44,7 @@ PoseForTaxPoseTerms = Literal["output", "taxpose_branch"]
 # (the default; a policy can choose its own, ``wpbench.training.specs``). 180 = every goal counts:
 # the nearest equivalent goal is always the target. A smaller gate makes the target flip where the
 # stored goal flips (a cube's at a 45 deg turn), and the network learns the average of both sides
-# (measured in docs/experiment-log.md, "symmetric-goal gate").
+# (measured in docs/experiment-log.md, "The block's rotation tail: no symmetric-goal gate").
 RETARGET_WITHIN_DEG = 180.0
 
 

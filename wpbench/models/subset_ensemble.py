@@ -33,8 +33,9 @@ measure exactly what the policies answer.
    both. With one subset the model's answer is returned as it is.
 
 How much the ensemble, the consensus and the mirrored views gain, per policy and kind, is
-measured in ``docs/experiment-log.md`` ("Subset ensemble"); the default number of subsets is
-``wpbench.models.configs.DEFAULT_SUBSETS``.
+measured in ``docs/experiment-log.md`` (the entries "Subset ensemble at test time", "The subset
+ensemble's consensus" and "Mirrored views in the subset ensemble"); the default number of
+subsets is ``wpbench.models.configs.DEFAULT_SUBSETS``.
 
 Convention: transforms act on column vectors, ``p_goal = R p + t``; clouds are (B, N, 3).
 """

@@ -32,7 +32,7 @@ class PolicySpec:
     # Random stretch of drawer samples along their slide (``random_slide_stretch``): "deeper chest,
     # longer slide", which the uniform scale does not teach (a chest's depth is drawn on its own).
     # On for gf and the WeightedPose variants, as their shipped weights are trained; TAX-Pose never
-    # sees a drawer move. Its effect is measured in docs/experiment-log.md.
+    # sees a drawer move. Its effect is measured in docs/experiment-log.md ("Slide stretch").
     augment_stretch: float = 0.0
     # A symmetric object's other equivalent goals become the training target once the prediction
     # is within this angle of one of them (``loss_presets.compute_loss``); 180 = always the nearest

@@ -5,8 +5,7 @@ TAX-Pose, but its mixing-weight head is new (Goal Flow alone never uses w).
 Training everything at once from there lets the gradients of a random w (0.5:
 half flow, half correspondences, wrong for both kinds) move the trained
 branches before w has learned which branch to trust, and the fused pose can end
-worse on articulated objects than Goal Flow alone (docs/experiment-log.md,
-"mixing warm-up").
+worse on articulated objects than Goal Flow alone (measured in docs/experiment-log.md).
 
 So the first ``fraction`` of the time budget trains only the mixing head with
 both branches frozen (a step then costs about one forward pass: nothing
