@@ -12,6 +12,7 @@ from wpbench.evaluation.leaderboard import (
     SORT_KEYS,
     collect_summaries,
     find_summaries,
+    leaderboard_markdown,
     write_leaderboard,
 )
 from wpbench.evaluation.summary import summarize, wilson_interval, write_summary
@@ -158,3 +159,15 @@ def test_run_without_episodes_is_listed_as_not_available(tmp_results):
 
 def test_cli_sort_choices_match_the_library():
     assert set(SORT_CHOICES) == set(SORT_KEYS)
+
+
+def test_the_executor_is_a_column_and_older_runs_count_as_ideal(tmp_results):
+    record = {"episode": 0, "seed": 0, "task": "open-door", "policy": "gt", "object_id": "o", "category": "oven",
+              "success": True, "rot_err_deg": 0.0, "trans_err_m": 0.0, "point_err_m": 0.0, "point_mse": 0.0}
+    write_summary(tmp_results / "old", summarize([record], {"split": "val", "asset_source": "procedural"}))
+    write_summary(tmp_results / "new", summarize([record], {"split": "val", "asset_source": "procedural",
+                                                            "executor": "gripper"}))
+    frame, _ = collect_summaries(tmp_results, sort_by="policy")
+    assert sorted(frame["executor"]) == ["gripper", "ideal"]
+    header = leaderboard_markdown(frame).splitlines()[6]
+    assert [cell.strip() for cell in header.split("|")][5:7] == ["obs", "executor"]

@@ -30,6 +30,14 @@ def run(
     num_action_points: int = typer.Option(256, min=8, help="Action-object points per observation."),
     num_anchor_points: int = typer.Option(1024, min=8, help="Anchor-object points per observation."),
     progress: bool = typer.Option(True, help="Show a progress bar."),
+    workers: int = typer.Option(
+        None, min=1, help="Worker processes running episodes side by side [default: the number of cores; "
+                          "1 with --record]. The records are the same whatever the number."),
+    ray: str = typer.Option(
+        None, "--ray", help="Run the episodes on a Ray cluster: 'auto' for the one this machine belongs to, "
+                            "'local' to start one here, or an address (host:port)."),
+    executor: str = typer.Option("ideal", help=f"How a predicted cross-pose is carried out: "
+                                               f"{', '.join(names.EXECUTORS)}."),
     weights_root: Path = typer.Option(
         None, help="Load trained policies from this folder instead of policies/weights (an experiment's "
                    "weights); the run then goes to <weights-root>/runs/ unless --out says otherwise."),
@@ -53,6 +61,11 @@ def run(
     check_choice("task", task, task_names)
     check_choice("split", split, names.RUN_SPLITS)
     check_choice("observation mode", obs, names.OBS_MODES)
+    check_choice("executor", executor, names.EXECUTORS)
+    if record is not None:
+        if workers not in (None, 1) or ray is not None:
+            raise typer.BadParameter("--record needs the episodes in this process: use --workers 1 without --ray")
+        record = free_recording_path(record)
     if assets != "procedural" and not Path(assets).is_dir():
         raise typer.BadParameter(f"--assets must be 'procedural' or an existing folder; {assets!r} is neither")
     policy_kwargs = {}
@@ -76,7 +89,7 @@ def run(
 
     cfg = RunConfig(policy=policy, task=task, split=split, episodes=episodes, seed=seed, assets=assets,
                     obs=obs, out=out, resume=resume, record=record, num_action_points=num_action_points,
-                    num_anchor_points=num_anchor_points, policy_kwargs=policy_kwargs)
+                    num_anchor_points=num_anchor_points, policy_kwargs=policy_kwargs, executor=executor)
     if out is None and weights_root is not None:
         # Keep an experiment's runs beside its weights, away from the shipped results/runs/.
         cfg.out = weights_root / "runs" / cfg.default_out().name
@@ -85,15 +98,99 @@ def run(
         from wpbench.evaluation.recording import RerunRecorder
 
         observer = RerunRecorder(record, application=f"wpbench {policy} {task}")
-    try:
-        summary = run_benchmark(cfg, progress=progress, observer=observer)
-    except (ValueError, FileExistsError, FileNotFoundError) as err:
-        typer.echo(f"Error: {err}", err=True)
-        raise typer.Exit(2)
-    finally:
-        if observer is not None:
-            observer.close()
+    from wpbench.evaluation.local_workers import available_cores
+
+    count = 1 if record is not None else (workers or available_cores())
+    summary = execute(lambda: run_benchmark(cfg, progress=progress, observer=observer, workers=count,
+                                            use_ray=ray is not None, ray_address=ray_address(ray)),
+                      out_dir=cfg.out or cfg.default_out(), finally_=observer.close if observer else None)
+    for note in summary.get("_notes", []):
+        typer.echo(f"note: {note}", err=True)
     typer.echo(format_summary_table(summary))
     typer.echo(f"results: {summary['_out_dir']}/episodes.jsonl, summary.json")
     if record is not None:
         typer.echo(f"recording: {record} (open with `rerun {record}`)")
+
+
+def ray_address(option: str | None) -> str | None:
+    """``--ray`` as Ray's ``address``: None (start a local cluster) for 'local', else as given."""
+    return None if option in (None, "local") else option
+
+
+def free_recording_path(path: Path) -> Path:
+    """``path``, or ``<stem>-2.rrd``, ``-3``... if it exists: an earlier recording is never
+    overwritten (``--resume --record`` records the new episodes beside it)."""
+    if path.is_dir():
+        fail(f"--record {path} is a folder; give a file name such as {path / 'run.rrd'}")
+    fresh, number = path, 2
+    while fresh.exists():
+        fresh = path.with_name(f"{path.stem}-{number}{path.suffix}")
+        number += 1
+    try:  # rerun reports an unwritable path only as a RuntimeError deep inside
+        fresh.parent.mkdir(parents=True, exist_ok=True)
+        with open(fresh, "xb"):
+            pass
+        fresh.unlink()
+    except OSError as err:
+        fail(f"cannot write the recording {fresh} ({err.strerror or err}); choose a writable --record path")
+    if fresh != path:
+        typer.echo(f"note: {path} exists (an earlier recording, kept); recording to {fresh}", err=True)
+    return fresh
+
+
+def fail(message: str, code: int = 2) -> None:
+    typer.echo(f"Error: {message}", err=True)
+    raise typer.Exit(code)
+
+
+def resume_command() -> str:
+    """The command line that was run, with --resume: how to continue an interrupted run."""
+    import shlex
+    import sys
+
+    arguments = [a for a in sys.argv[1:]]
+    if "--resume" not in arguments:
+        arguments.append("--resume")
+    return shlex.join(["wpbench", *arguments])
+
+
+def execute(call, out_dir: Path, finally_=None):
+    """``call()`` with the run's errors as one-line messages that say what to do (exit 2),
+    and Ctrl-C as the resume command (exit 130)."""
+    from wpbench.evaluation.driver import RunInterrupted
+    from wpbench.evaluation.interrupt import INTERRUPTED_EXIT_CODE
+    from wpbench.evaluation.local_workers import WorkerError
+    from wpbench.evaluation.run_lock import RunLockedError
+
+    try:
+        return call()
+    except RunInterrupted as err:
+        typer.echo(f"{err}; continue with:\n  {resume_command()}", err=True)
+        raise typer.Exit(INTERRUPTED_EXIT_CODE)
+    except KeyboardInterrupt:
+        typer.echo(f"aborted; finished episodes are kept in {out_dir}; continue with:\n  {resume_command()}",
+                   err=True)
+        raise typer.Exit(INTERRUPTED_EXIT_CODE)
+    except (ValueError, FileExistsError, FileNotFoundError, RunLockedError, WorkerError) as err:
+        fail(str(err))
+    except OSError as err:
+        fail(filesystem_message(err, out_dir))
+    finally:
+        if finally_ is not None:
+            finally_()
+
+
+def filesystem_message(err: OSError, out_dir: Path) -> str:
+    """One line for a file-system error: what failed and what to do."""
+    import errno
+
+    from wpbench.evaluation.records import RecordWriteError
+
+    if isinstance(err, RecordWriteError):
+        return str(err)
+    where = err.filename or out_dir
+    if err.errno == errno.ENOSPC:
+        return f"disk full writing {where}; free space, then rerun with --resume (finished episodes are kept)"
+    if err.errno in (errno.EROFS, errno.EACCES, errno.EPERM):
+        return f"cannot write to {where} ({err.strerror}); choose a writable --out"
+    return f"cannot use {where} ({err.strerror or err}); check the path and rerun (with --resume to continue)"

@@ -3,7 +3,8 @@
 ``write_leaderboard(results_dir)`` searches ``results_dir`` recursively for
 ``summary.json`` files (see :mod:`wpbench.evaluation.summary`) and writes
 
-- ``leaderboard.md``: one row per run (policy x task x split x asset source),
+- ``leaderboard.md``: one row per run (policy x task x split x asset source x
+  observation x executor),
   success rate with its 95 % Wilson interval, rotation/translation errors,
   episode count and the run directory;
 - ``leaderboard.csv``: the same rows with raw numbers, for other tools;
@@ -44,6 +45,7 @@ LEADERBOARD_COLUMNS: tuple[str, ...] = (
     "split",
     "asset_source",
     "obs",
+    "executor",
     "episodes",
     "successes",
     "success_rate",
@@ -111,6 +113,8 @@ def _row(summary: dict[str, Any], run: str) -> dict[str, Any]:
         "split": summary.get("split") or "-",
         "asset_source": summary.get("asset_source") or "-",
         "obs": (summary.get("meta") or {}).get("obs") or summary.get("obs") or "-",
+        # Runs made before executors existed used the ideal one.
+        "executor": (summary.get("meta") or {}).get("executor") or "ideal",
         "episodes": int(summary.get("episodes") or 0),
         "successes": int(summary.get("successes") or 0),
         "success_rate": _get(summary, "success_rate"),
@@ -180,6 +184,7 @@ def leaderboard_markdown(frame: "Any", skipped: list[Path] | tuple[Path, ...] = 
         "split",
         "assets",
         "obs",
+        "executor",
         "success [95% CI]",
         "rot err deg (mean / median)",
         "trans err m (mean / median)",
@@ -193,6 +198,7 @@ def leaderboard_markdown(frame: "Any", skipped: list[Path] | tuple[Path, ...] = 
             row.split,
             _short_source(row.asset_source),
             row.obs,
+            row.executor,
             _success_cell(row),
             f"{_fmt(row.rot_err_deg_mean, 2)} / {_fmt(row.rot_err_deg_median, 2)}",
             f"{_fmt(row.trans_err_m_mean, 4)} / {_fmt(row.trans_err_m_median, 4)}",
@@ -218,7 +224,7 @@ def leaderboard_markdown(frame: "Any", skipped: list[Path] | tuple[Path, ...] = 
 
 def _bar_labels(frame: "Any") -> list[str]:
     """Policy names, plus split / asset source / run where needed to tell bars apart."""
-    varying = [key for key in ("split", "asset_source", "obs") if frame[key].nunique() > 1]
+    varying = [key for key in ("split", "asset_source", "obs", "executor") if frame[key].nunique() > 1]
     labels = []
     for row in frame.itertuples(index=False):
         extra = [_short_source(str(getattr(row, key))) for key in varying]

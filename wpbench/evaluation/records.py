@@ -9,7 +9,10 @@ read it. One run of one policy on one task/split writes one directory:
 - ``episodes.jsonl``: one JSON object per line, one line per finished episode,
   appended (flushed and fsync'ed) as each episode ends, so a crash loses at most
   the episode in progress. A truncated last line left by a crash is dropped when
-  the directory is reopened; any other unreadable line is an error.
+  the directory is reopened; any other unreadable line is an error, and so is an
+  episode recorded twice or a record of another run (another policy, task, split,
+  observation or seed). Parallel workers finish episodes out of order: the file is
+  put back in episode order when the run ends.
 
 Required keys of an episode record (others are allowed and kept):
 ``episode`` (int index), ``seed`` (int), ``task``, ``policy``, ``object_id``,
@@ -28,7 +31,7 @@ import json
 import math
 import os
 import warnings
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +43,7 @@ __all__ = [
     "RESUME_MAY_DIFFER",
     "RunMismatchError",
     "RecordFormatError",
+    "RecordWriteError",
     "EpisodeWriter",
     "read_episodes",
     "records_from",
@@ -72,6 +76,11 @@ ERROR_KEYS: tuple[str, ...] = ("rot_err_deg", "trans_err_m", "point_err_m", "poi
 RESUME_MAY_DIFFER: frozenset[str] = frozenset(
     {"episodes", "num_episodes", "resume", "out_dir", "out", "record", "render", "progress", "workers"}
 )
+# Run-config keys added after runs were first written: a run.json without one of them
+# was written with this value (None: not known, so not compared).
+RESUME_DEFAULTS: dict[str, Any] = {"executor": "ideal", "assets_digest": None}
+# Record keys that must equal the run config's value of the same name.
+RECORD_CONFIG_KEYS: tuple[str, ...] = ("policy", "task", "split", "obs")
 
 
 class RecordFormatError(ValueError):
@@ -80,6 +89,17 @@ class RecordFormatError(ValueError):
 
 class RunMismatchError(ValueError):
     """``--resume`` was asked for a directory holding a different run."""
+
+
+class RecordWriteError(OSError):
+    """The file system refused an episode record (read-only, full, gone); ``errno`` is the cause's."""
+
+    def __init__(self, code: int | None, message: str) -> None:
+        super().__init__(message)
+        self.errno = code
+
+    def __str__(self) -> str:
+        return str(self.args[0])
 
 
 def to_json_safe(value: Any) -> Any:
@@ -198,11 +218,14 @@ def _normalise_config(config: Mapping[str, Any]) -> dict[str, Any]:
 
 def _config_differences(stored: Mapping[str, Any], requested: Mapping[str, Any]) -> list[str]:
     keys = (set(stored) | set(requested)) - RESUME_MAY_DIFFER
-    return [
-        f"{key}: stored {stored.get(key)!r}, requested {requested.get(key)!r}"
-        for key in sorted(keys)
-        if stored.get(key) != requested.get(key)
-    ]
+    differences = []
+    for key in sorted(keys):
+        old = stored[key] if key in stored else RESUME_DEFAULTS.get(key)
+        if key not in stored and key in RESUME_DEFAULTS and RESUME_DEFAULTS[key] is None:
+            continue  # an older run.json that did not record it: nothing to compare
+        if old != requested.get(key):
+            differences.append(f"{key}: stored {old!r}, requested {requested.get(key)!r}")
+    return differences
 
 
 class EpisodeWriter:
@@ -227,16 +250,20 @@ class EpisodeWriter:
         run_config: Mapping[str, Any] | None = None,
         *,
         resume: bool = False,
+        expected_seed: Callable[[int], int] | None = None,
     ) -> None:
         self.out_dir = Path(out_dir)
+        self.expected_seed = expected_seed
         self.path = self.out_dir / EPISODES_FILE
         self.run_config_path = self.out_dir / RUN_CONFIG_FILE
         self.run_config = _normalise_config(run_config or {})
         self._completed: set[int] = set()
         self.records: list[dict[str, Any]] = []
         self.dropped_bytes = 0
+        self.written = 0
 
         self.out_dir.mkdir(parents=True, exist_ok=True)
+        self._created = not self.path.exists(), not self.run_config_path.exists()
         has_episodes = self.path.exists() and self.path.stat().st_size > 0
         if has_episodes and not resume:
             raise FileExistsError(
@@ -287,8 +314,32 @@ class EpisodeWriter:
                 handle.flush()
                 os.fsync(handle.fileno())
             self.dropped_bytes = dropped
+        self._check_records(records)
         self.records = records
         self._completed = {int(record["episode"]) for record in records}
+
+    def _check_records(self, records: list[dict[str, Any]]) -> None:
+        """Refuse a file that two writers filled at once (an episode twice) or that holds
+        episodes of another run (another policy, task, split, observation or seed)."""
+        seen: set[int] = set()
+        for line, record in enumerate(records, start=1):
+            validate_record(record)
+            episode = int(record["episode"])
+            if episode in seen:
+                raise RunMismatchError(
+                    f"{self.path} holds episode {episode} more than once (two runs wrote to it at the same "
+                    "time?); its numbers cannot be trusted: rerun into a new --out"
+                )
+            seen.add(episode)
+            foreign = [f"{key} {record[key]!r} (run: {self.run_config[key]!r})" for key in RECORD_CONFIG_KEYS
+                       if key in record and key in self.run_config and record[key] != self.run_config[key]]
+            if self.expected_seed is not None and int(record["seed"]) != self.expected_seed(episode):
+                foreign.append(f"seed {record['seed']} (run: {self.expected_seed(episode)})")
+            if foreign:
+                raise RunMismatchError(
+                    f"{self.path}: record {line} (episode {episode}) belongs to another run: "
+                    + ", ".join(foreign) + "; rerun into a new --out"
+                )
 
     @staticmethod
     def _write_json_atomically(path: Path, value: Any) -> None:
@@ -302,7 +353,11 @@ class EpisodeWriter:
         return set(self._completed)
 
     def write(self, record: Mapping[str, Any]) -> None:
-        """Validate ``record`` and append it as one line, durably (flush + fsync)."""
+        """Validate ``record`` and append it as one line, durably (flush + fsync).
+
+        If the file system refuses (full, read-only), the file is cut back to its last
+        complete record and :class:`RecordWriteError` says so.
+        """
         if self._file.closed:
             raise ValueError(f"EpisodeWriter for {self.out_dir} is closed")
         validate_record(record)
@@ -310,11 +365,65 @@ class EpisodeWriter:
         if episode in self._completed:
             raise RecordFormatError(f"episode {episode} is already recorded in {self.path}")
         line = dumps_json(record, sort_keys=False)
-        self._file.write(line + "\n")
-        self._file.flush()
-        os.fsync(self._file.fileno())
+        good_end = self._file.tell()
+        try:
+            self._file.write(line + "\n")
+            self._file.flush()
+            os.fsync(self._file.fileno())
+        except OSError as error:
+            self._cut_back(good_end)
+            raise RecordWriteError(
+                error.errno, f"cannot write episode {episode} to {self.path} ({error.strerror or error}); "
+                f"the {len(self._completed)} episodes before it are kept: free space or make the folder "
+                "writable, then rerun with --resume"
+            ) from None
         self._completed.add(episode)
+        self.written += 1
         self.records.append(_restore_nans(json.loads(line)))
+
+    def _cut_back(self, good_end: int) -> None:
+        """Drop whatever part of a failed line reached the file (best effort)."""
+        try:
+            self._file.close()
+        except OSError:
+            pass
+        try:
+            os.truncate(self.path, good_end)
+        except OSError:
+            pass
+        self._file = open(self.path, "a", encoding="utf-8")
+
+    def sort_by_episode(self) -> None:
+        """Rewrite the file in episode order if records arrived out of order (parallel
+        workers); atomic, so a crash leaves either the old or the new file."""
+        order = sorted(range(len(self.records)), key=lambda i: int(self.records[i]["episode"]))
+        if order == list(range(len(self.records))):
+            return
+        lines = self.path.read_bytes().splitlines(keepends=True)
+        lines = [line for line in lines if line.strip()]
+        if len(lines) != len(self.records):
+            raise RecordFormatError(f"{self.path} changed while it was being written")
+        self._file.close()
+        temporary = self.path.with_suffix(self.path.suffix + ".tmp")
+        with open(temporary, "wb") as handle:
+            handle.writelines(lines[i] for i in order)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(temporary, self.path)
+        self.records = [self.records[i] for i in order]
+        self._file = open(self.path, "a", encoding="utf-8")
+
+    def discard_if_unused(self) -> None:
+        """Close; if this writer created the files and wrote no episode, remove them."""
+        self.close()
+        if self.written or self.records:
+            return
+        for created, path in zip(self._created, (self.path, self.run_config_path)):
+            if created:
+                try:
+                    path.unlink()
+                except FileNotFoundError:
+                    pass
 
     def close(self) -> None:
         if not self._file.closed:

@@ -1,8 +1,15 @@
 """Run a policy on a task for N episodes and write the results (``wpbench run``).
 
 Read top to bottom: make the env, make the policy, then for each episode
-reset -> (observe -> predict -> step) per stage -> one record appended to
-``episodes.jsonl``; at the end ``summary.json`` and a table.
+reset -> (observe -> predict -> step) per stage -> one record. :class:`EpisodeSession`
+holds one run's env and policy and turns every episode into a record, a failed one
+too; :func:`run_benchmark` hands the episodes to a pool (this process, worker
+processes or Ray) through :mod:`wpbench.evaluation.driver`, which alone writes
+``episodes.jsonl`` and, at the end, ``summary.json``.
+
+An episode is a function of its seed alone (whatever the env ran before it), so any
+worker may run any episode and the records do not depend on the schedule; only
+``timings`` and ``ran_on`` (host and process) do.
 
 Episode records carry the public keys of ``wpbench.evaluation.records`` plus
 ``stages`` (one dict per stage with its own metrics and the executor's report).
@@ -13,7 +20,9 @@ For a two-stage episode the top-level errors are the mean over its stages and
 from __future__ import annotations
 
 import json
+import os
 import resource
+import socket
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -41,6 +50,7 @@ class RunConfig:
     num_action_points: int = 256
     num_anchor_points: int = 1024
     policy_kwargs: dict = field(default_factory=dict)
+    executor: str = "ideal"
 
     def default_out(self) -> Path:
         source = "procedural" if self.assets == "procedural" else Path(self.assets).name
@@ -61,6 +71,9 @@ def make_env(cfg: RunConfig):
     info = import_task(cfg.task)  # registers the task's env with gymnasium
     # Real PartNet-Mobility folders have no split: every object is unseen furniture.
     split = None if cfg.assets != "procedural" or cfg.split in ("all", None) else cfg.split
+    # The ideal executor is the env's own default: naming it keeps envs that take no
+    # executor argument working.
+    executor = {} if cfg.executor == "ideal" else {"executor": cfg.executor}
     return gym.make(
         info.env_id,
         obs_mode=cfg.obs,
@@ -68,6 +81,7 @@ def make_env(cfg: RunConfig):
         split=split,
         num_action_points=cfg.num_action_points,
         num_anchor_points=cfg.num_anchor_points,
+        **executor,
     )
 
 
@@ -83,8 +97,49 @@ def policy_inputs(policy, obs: dict, ground_truth) -> tuple[dict[str, Any], dict
     return observation, (ground_truth() if policy.uses_ground_truth else None)
 
 
+class PolicyAnswerError(ValueError):
+    """A policy's answer cannot be carried out: it is that stage's failure."""
+
+
+# A cross-pose moves an object within a tabletop scene; a translation beyond this is no pose.
+MAX_TRANSLATION_M = 1e3
+
+
+def checked_answer(out: Any) -> tuple[np.ndarray, dict[str, Any]]:
+    """``(transform (4, 4) float64, diagnostics)`` of a policy's answer, or
+    :class:`PolicyAnswerError` saying what is wrong with it."""
+    if out is None:
+        raise PolicyAnswerError("policy returned None instead of a PolicyOutput")
+    transform = getattr(out, "transform", None)
+    if transform is None:
+        raise PolicyAnswerError(f"policy returned {type(out).__name__}, not a PolicyOutput with a transform")
+    try:
+        transform = np.asarray(transform, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise PolicyAnswerError(f"policy transform is not a numeric array ({err})") from None
+    if transform.shape != (4, 4):
+        raise PolicyAnswerError(f"policy transform has shape {transform.shape}, expected (4, 4)")
+    if not np.all(np.isfinite(transform)):
+        raise PolicyAnswerError("policy transform has non-finite entries")
+    distance = float(np.linalg.norm(transform[:3, 3]))
+    if distance > MAX_TRANSLATION_M:
+        raise PolicyAnswerError(f"policy translation of {distance:.3g} m is beyond {MAX_TRANSLATION_M:g} m")
+    diagnostics = getattr(out, "diagnostics", None)
+    return transform, diagnostics if isinstance(diagnostics, dict) else {}
+
+
+def _describe_error(err: BaseException) -> str:
+    text = str(err).strip().splitlines()
+    return f"{type(err).__name__}: {text[0]}" if text else type(err).__name__
+
+
 def run_episode(env, policy, seed: int, observer=None) -> dict[str, Any]:
-    """One episode: every stage observed, predicted and executed. Returns the raw record."""
+    """One episode: every stage observed, predicted and executed. Returns the raw record.
+
+    A policy that raises, or answers something that is not a usable (4, 4) cross-pose,
+    fails that stage (``failure_reason`` says why; the simulator is given a NaN pose,
+    which it refuses to execute); errors of the simulator itself propagate.
+    """
     base = env.unwrapped
     t0 = time.perf_counter()
     obs, info = env.reset(seed=seed)
@@ -96,10 +151,11 @@ def run_episode(env, policy, seed: int, observer=None) -> dict[str, Any]:
         np_obs, info = policy_inputs(policy, obs, base.ground_truth)
         t1 = time.perf_counter()
         try:
-            out = policy.predict(np_obs, info)
-            transform, diagnostics, error = out.transform, out.diagnostics, ""
-        except ValueError as err:  # a policy that cannot answer fails the stage, the run goes on
-            transform, diagnostics, error = np.full((4, 4), np.nan), {}, f"policy error: {err}"
+            transform, diagnostics = checked_answer(policy.predict(np_obs, info))
+            error = ""
+        except Exception as err:  # noqa: BLE001 - any policy failure fails the stage, the run goes on
+            error = f"policy error: {_describe_error(err)}"
+            transform, diagnostics = np.full((4, 4), np.nan), {}
         t_policy += time.perf_counter() - t1
         if observer is not None:
             observer.log_prediction(base, np_obs, transform, diagnostics)
@@ -142,11 +198,79 @@ def run_episode(env, policy, seed: int, observer=None) -> dict[str, Any]:
     return record
 
 
+def run_fields(cfg: RunConfig, index: int) -> dict[str, Any]:
+    """The keys every record of run ``cfg`` carries for its episode ``index``."""
+    return {"episode": index, "task": cfg.task, "policy": cfg.policy, "split": cfg.split, "obs": cfg.obs}
+
+
+def failure_record(cfg: RunConfig, index: int, reason: str, asset: Any = None) -> dict[str, Any]:
+    """The record of an episode that could not be run to its end: a failure with NaN errors
+    and ``failure_reason``; ``asset`` (the episode's furniture, if it was drawn) names the object."""
+    record = {
+        "seed": episode_seed(cfg.seed, index),
+        "object_id": getattr(asset, "object_id", None),
+        "category": getattr(asset, "category", None),
+        "asset_source": getattr(asset, "source", None),
+        "success": False, "success_at_end": False, "success_once": False,
+        "stages": [], "failure_reason": reason,
+    }
+    record.update({key: float("nan") for key in ERROR_FIELDS})
+    record.update(run_fields(cfg, index))
+    return record
+
+
+def where_am_i() -> dict[str, Any]:
+    """Where an episode ran (not scored; differs between schedules like the timings do)."""
+    return {"host": socket.gethostname(), "pid": os.getpid()}
+
+
+class EpisodeSession:
+    """The env and the policy of one run, built once, running its episodes by index.
+
+    ``run(index)`` always returns a complete record: an error of the simulator during
+    the episode becomes that episode's failure (with its reason) and the env is built
+    anew for the next one.
+    """
+
+    def __init__(self, cfg: RunConfig, policy=None, observer=None) -> None:
+        from wpbench.policies.registry import make_policy
+
+        self.cfg = cfg
+        self.policy = policy or make_policy(cfg.policy, **cfg.policy_kwargs)
+        self.observer = observer
+        self.env = make_env(cfg)
+
+    def run(self, index: int) -> dict[str, Any]:
+        if self.env is None:
+            self.env = make_env(self.cfg)
+        seed = episode_seed(self.cfg.seed, index)
+        before = getattr(self.env.unwrapped, "asset", None)
+        try:
+            record = run_episode(self.env, self.policy, seed, observer=self.observer)
+        except Exception as err:  # noqa: BLE001 - the simulator failed this episode, not the run
+            asset = getattr(self.env.unwrapped, "asset", None)
+            asset = None if asset is before else asset  # the failure came before this episode's draw
+            record = failure_record(self.cfg, index, f"simulator error: {_describe_error(err)}", asset)
+            self.close()
+        record.update(run_fields(self.cfg, index))
+        record["ran_on"] = where_am_i()
+        return record
+
+    def close(self) -> None:
+        if self.env is not None:
+            try:
+                self.env.close()
+            finally:
+                self.env = None
+
+
 def produced_by(cfg: RunConfig, policy) -> dict[str, Any]:
     """What decides an episode beside the run's settings: the trained weights the policy
     loaded (their ``model_hash``es, none for ``gt`` / ``identity``) and the version of the
     furniture generator (built-in assets only). ``run.json`` stores these, so ``--resume``
-    refuses to append episodes of retrained weights or rebuilt furniture to an old run."""
+    refuses to append episodes of retrained weights or rebuilt furniture to an old run.
+    For a PartNet-Mobility folder, the content hash of the folder (``assets_digest``)
+    plays the part of the generator version."""
     hashes: set[str] = set()
 
     def collect(value: Any) -> None:
@@ -157,12 +281,16 @@ def produced_by(cfg: RunConfig, policy) -> dict[str, Any]:
                 collect(item)
 
     collect(policy.describe())
-    generator = None
+    generator, digest = None, None
     if cfg.assets == "procedural":
         from wpbench.assets.procedural.generate import GENERATOR_VERSION
 
         generator = GENERATOR_VERSION
-    return {"policy_weights": sorted(hashes), "furniture_generator": generator}
+    else:
+        from wpbench.evaluation.asset_digest import folder_digest
+
+        digest = folder_digest(cfg.assets)
+    return {"policy_weights": sorted(hashes), "furniture_generator": generator, "assets_digest": digest}
 
 
 def run_benchmark(
@@ -171,59 +299,22 @@ def run_benchmark(
     policy=None,
     observer=None,
     on_episode: Callable[[dict], None] | None = None,
+    workers: int = 1,
+    ray_address: str | None = None,
+    use_ray: bool = False,
 ) -> dict[str, Any]:
-    """Run ``cfg`` and return its summary (also written to ``out/summary.json``)."""
-    from tqdm import tqdm
+    """Run ``cfg`` and return its summary (also written to ``out/summary.json``).
 
-    from wpbench.policies.registry import make_policy
-    from wpbench.evaluation.records import EpisodeWriter
-    from wpbench.evaluation.summary import summarize, write_summary
+    ``workers``: 1 runs the episodes in this process (``policy`` and ``observer`` objects
+    are only usable then); more runs them in that many worker processes. ``use_ray``: run
+    them on a Ray cluster instead (``ray_address`` ``"auto"`` for an existing one, None
+    for a local one). The records are the same whichever runs them.
+    """
+    from wpbench.evaluation.driver import run_many
+    from wpbench.evaluation.pools import make_pool
 
-    out = Path(cfg.out) if cfg.out is not None else cfg.default_out()
-    policy = policy or make_policy(cfg.policy, **cfg.policy_kwargs)
-    run_config = {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(cfg).items()}
-    run_config["out"] = str(out)
-    run_config.update(produced_by(cfg, policy))
-    started = time.perf_counter()
-    with EpisodeWriter(out, run_config, resume=cfg.resume) as writer:
-        done = writer.completed_episodes()
-        todo = [i for i in range(cfg.episodes) if i not in done]
-        env = make_env(cfg) if todo else None
-        successes = sum(bool(r.get("success")) for r in writer.records)
-        bar = tqdm(total=cfg.episodes, initial=len(done), disable=not progress, desc=f"{cfg.policy} {cfg.task}",
-                   unit="ep", dynamic_ncols=True)
-        for i in todo:
-            record = run_episode(env, policy, episode_seed(cfg.seed, i), observer=observer)
-            record.update(episode=i, task=cfg.task, policy=cfg.policy, split=cfg.split, obs=cfg.obs)
-            writer.write(record)
-            successes += record["success"]
-            finished = len(writer.completed_episodes())
-            bar.update(1)
-            bar.set_postfix(success=f"{successes / finished:.0%}")
-            if on_episode is not None:
-                on_episode(record)
-        bar.close()
-        if env is not None:
-            env.close()
-        records = list(writer.records)
-    meta = {
-        "policy": cfg.policy, "task": cfg.task, "split": cfg.split, "asset_source": cfg.assets,
-        "obs": cfg.obs, "seed": cfg.seed,
-        # Episode times come from the records, so a resumed run reports the whole run;
-        # peak memory is this process's (a resumed run's is the last session's).
-        "timings": {"wall_s": float(sum(r.get("timings", {}).get("episode_s", 0.0) for r in records)),
-                    "session_wall_s": time.perf_counter() - started,
-                    "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024},
-        "policy_info": policy.describe(),
-    }
-    previous = out / "summary.json"
-    if previous.is_file():  # a resumed run: memory peaked in whichever session was largest
-        try:
-            before = json.loads(previous.read_text())["timings"]["run"]["peak_rss_mib"]
-            meta["timings"]["peak_rss_mib"] = max(meta["timings"]["peak_rss_mib"], float(before))
-        except (KeyError, TypeError, ValueError):
-            pass
-    summary = summarize(records, meta)
-    write_summary(out, summary)
-    summary["_out_dir"] = str(out)
-    return summary
+    if (policy is not None or observer is not None) and (workers != 1 or use_ray):
+        raise ValueError("a policy object or an observer (--record) needs the episodes in this process: --workers 1")
+    pool = make_pool(workers=workers, use_ray=use_ray, ray_address=ray_address, policy=policy, observer=observer)
+    return run_many([cfg], pool, policies={0: policy} if policy is not None else None, progress=progress,
+                    on_episode=on_episode)[0]
