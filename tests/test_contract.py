@@ -188,3 +188,13 @@ def test_a_task_of_ones_own_runs_through_wpbench_run(tmp_path):
     broken = subprocess.run(cmd, env={**env, names.PLUGINS_VARIABLE: "no_such_module"}, capture_output=True,
                             text=True, timeout=300)
     assert broken.returncode == 2 and "WPBENCH_PLUGINS names module 'no_such_module'" in broken.stderr
+
+
+def test_policy_groups_match_the_registry_and_the_training_specs():
+    from wpbench.training.specs import POLICY_SPECS
+
+    registered = set(available_policies())
+    assert set(names.TRAINABLE_POLICIES) == set(POLICY_SPECS)
+    assert set(names.WEIGHTED_POSE_VARIANTS) == {n for n, spec in POLICY_SPECS.items() if spec.model == "weightedpose"}
+    for group in (names.TRAINABLE_POLICIES, names.PRIVILEGED_POLICIES, names.WEIGHTED_POLICIES):
+        assert set(group) <= registered

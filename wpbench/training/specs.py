@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from wpbench.data.config import ARTICULATED, FREE
+from wpbench.names import ARTICULATED, FREE, TRAINABLE_POLICIES, WEIGHTED_POSE_VARIANTS
 from wpbench.models.loss_presets import RETARGET_WITHIN_DEG
 
 
@@ -51,10 +51,12 @@ POLICY_SPECS: dict[str, PolicySpec] = {
     for spec in (
         PolicySpec("gf", "goalflow", "gf", (ARTICULATED,), augment_scale=0.15, augment_stretch=0.25),
         PolicySpec("tp", "taxpose", "tp", (FREE,)),
-        *(_weighted_pose(name) for name in ("wp-og", "wp-postsvd", "wp-postsvd-t")),
+        *(_weighted_pose(name) for name in WEIGHTED_POSE_VARIANTS),
     )
 }
-WEIGHTED_POSE_VARIANTS = tuple(name for name, spec in POLICY_SPECS.items() if spec.model == "weightedpose")
+if tuple(POLICY_SPECS) != TRAINABLE_POLICIES:
+    raise ImportError(f"wpbench.training.specs describes {tuple(POLICY_SPECS)}, but wpbench.names lists "
+                      f"{TRAINABLE_POLICIES} as trainable: make them the same")
 
 
 def get_spec(name: str) -> PolicySpec:
