@@ -36,6 +36,7 @@ bad object never stops the others.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -46,7 +47,8 @@ import numpy as np
 from wpbench.assets.cavity import CavityConfig, door_cavity, drawer_inner_volume
 from wpbench.assets.collision import CoacdConfig, CollisionBuildError, build_hollow_collision_urdf
 from wpbench.assets.collision_fallback import CONVEX_HULL
-from wpbench.assets.reach import reachable_open_qpos
+from wpbench.assets.clear_path import clear_target_path
+from wpbench.assets.reach import BACK_OFF, OpeningProbe
 from wpbench.assets.spec import FurnitureAsset
 
 # Typical largest side (metres) of the closed object, per wpbench category.
@@ -77,6 +79,11 @@ _CATEGORY_ALIASES: dict[str, str] = {
 }
 
 MIN_REGION_HALF_EXTENT_M = 0.02  # a region must hold at least a 4 cm object
+# A collision piece may be dropped from a door's path only if the cavity keeps this fraction of its volume.
+CAVITY_KEEP_FRACTION = 0.8
+MAX_NAMED_BLOCKERS = 2  # blocking pieces named in a message
+
+log = logging.getLogger(__name__)
 _DOOR_MIN_RANGE_RAD = 0.3  # hinges that barely move (latches) are not doors
 
 
@@ -92,6 +99,9 @@ class PartNetLoadConfig:
     cavity: CavityConfig = CavityConfig()
     # Measure in physics how far the target really opens (see wpbench.assets.reach).
     probe_reach: bool = True
+    # Trim collision pieces overlapping the target and drop those blocking it that the cavity can spare
+    # (wpbench.assets.clear_path); False only measures (the check without the fix).
+    clear_path: bool = True
     # Refuse targets that physics lets open less than this fraction of their range.
     min_reach_fraction: float = 0.5
     # Decomposition worker processes (None: one per core) and whether to show their progress bar.
@@ -463,49 +473,55 @@ def load_partnet_object(
             normal /= np.linalg.norm(normal)
             front = normal if normal @ front > 0 else -normal
 
-    if target.is_door:
-        posed.set(closed_values)
-        region = door_cavity(posed.pieces(anchor_links), posed.pieces([target.link]),
-                             bounds_low, bounds_high, config.cavity)
-        region_state = "closed"
-    else:
-        posed.set({**closed_values, target.joint: open_q})
-        region = drawer_inner_volume(posed.pieces([target.link]), config.cavity)
-        region_state = "open"
-    posed.set(closed_values)
-    if region is None or min(region.half_extents) < MIN_REGION_HALF_EXTENT_M:
-        size = None if region is None else [round(2 * h, 3) for h in region.half_extents]
-        hulls = [link for link, why in derived.fallbacks.items() if link in anchor_links and why.startswith(CONVEX_HULL)]
-        cause = (f"link(s) {hulls} stand in as their convex hull ({'; '.join(derived.fallbacks[h] for h in hulls)}), "
-                 "which fills the cavity" if hulls else "the collision pieces may fill it")
-        raise PartNetLoadError(
-            f"{object_id}: found no free cavity behind {target.link} big enough for an object (size {size} m); "
-            f"{cause}: delete the cache directory {derived.urdf.parent} and lower CoacdConfig.threshold, "
-            "or pick another target_link."
-        )
-    if target.is_door:
-        door_inner_face = float((door_closed @ front).min())
-        if float(np.asarray(region.center) @ front) >= door_inner_face:
-            raise PartNetLoadError(
-                f"{object_id}: the free region found is not behind {target.link}; pass target_link= "
-                "or check the object's geometry."
-            )
+    def find_region(pose_of):
+        """The cavity behind the target of the articulation ``pose_of`` (a _Posed)."""
+        if target.is_door:
+            pose_of.set(closed_values)
+            return door_cavity(pose_of.pieces(anchor_links), pose_of.pieces([target.link]),
+                               bounds_low, bounds_high, config.cavity), "closed"
+        pose_of.set({**closed_values, target.joint: open_q})
+        return drawer_inner_volume(pose_of.pieces([target.link]), config.cavity), "open"
+
+    region, region_state = find_region(posed)
+    _check_region(object_id, target, region, derived, anchor_links, door_closed, front)
 
     reachable = open_q
+    clearing = None
     if config.probe_reach:
-        reachable = reachable_open_qpos(articulation, target.joint, closed_values, closed_q, open_q)
+        def cavity_survives(pieces_by_link: dict[str, list[np.ndarray]]) -> bool:
+            anchor = [p for name in anchor_links for p in pieces_by_link.get(name, [])]
+            found = door_cavity(anchor, [p for p in pieces_by_link.get(target.link, [])], bounds_low, bounds_high,
+                                config.cavity)
+            return (found is not None and min(found.half_extents) >= MIN_REGION_HALF_EXTENT_M
+                    and np.prod(found.half_extents) >= CAVITY_KEEP_FRACTION * np.prod(region.half_extents))
+
+        clearing = clear_target_path(
+            derived.urdf, final_scale, closed_values, target.joint, closed_q, open_q,
+            cavity_survives if target.is_door else None, load_collision_articulation, repair=config.clear_path)
+        if clearing.changed:
+            del articulation, scene
+            scene, articulation = load_collision_articulation(clearing.urdf, final_scale)
+            posed = _Posed(articulation)
+            region, region_state = find_region(posed)
+            _check_region(object_id, target, region, derived, anchor_links, door_closed, front)
+        probe = clearing.probe
+        reachable = open_q if probe.full else probe.reached - BACK_OFF * (open_q - closed_q)
         if (reachable - closed_q) / (open_q - closed_q) < config.min_reach_fraction:
             raise PartNetLoadError(
-                f"{object_id}: {target.link} opens only to q={reachable:.3f} of its limit {open_q:.3f} in physics "
-                "(collision pieces block it); pick another target_link or rebuild its collision (delete "
-                f"{derived.urdf.parent})."
+                f"{object_id}: {target.link} opens only to q={probe.reached:.3f} of its limit {open_q:.3f} in "
+                f"physics, {describe_blockers(probe)} ({'pieces the cavity needs are never removed' if config.clear_path else 'clear_path is off'}); pick another target_link or "
+                f"rebuild its collision (delete {derived.urdf.parent})."
             )
+        if not probe.full:
+            log.warning("%s: %s opens %.0f%% of its range (to q=%.3f of %.3f): %s; the goal is lowered to q=%.3f",
+                        object_id, target.link, 100 * (probe.reached - closed_q) / (open_q - closed_q),
+                        probe.reached, open_q, describe_blockers(probe), reachable)
     posed.set(closed_values)
     del articulation, scene
     return FurnitureAsset(
         object_id=object_id,
         category=category,
-        urdf=derived.urdf,
+        urdf=clearing.urdf if clearing is not None else derived.urdf,
         scale=float(final_scale),
         target_link=target.link,
         target_joint=target.joint,
@@ -529,9 +545,42 @@ def load_partnet_object(
             "links_without_collision": list(derived.links_without_collision),
             "in_region_state": region_state,
             "open_qpos_limit": float(open_q),  # the URDF limit; open_qpos is what physics reaches
+            "collision_trimmed": list(clearing.trimmed) if clearing is not None else [],
+            "collision_dropped": list(clearing.dropped) if clearing is not None else [],
+            "reach_blocked_by": describe_blockers(clearing.probe) if clearing is not None and not clearing.probe.full else "",
             "target_label": target.label,
         },
     )
+
+
+def describe_blockers(probe: OpeningProbe) -> str:
+    """One phrase naming what holds the door at the stop, e.g. "held by link_2 piece 3 at (0.1, -0.3, 0.4)"."""
+    if not probe.blockers:
+        return "held by its own drive or joint friction (no contact)"
+    parts = [f"{b.link} piece {b.piece} at ({', '.join(f'{v:.2f}' for v in b.position)})"
+             for b in probe.blockers[:MAX_NAMED_BLOCKERS]]
+    return "held by " + ", ".join(parts)
+
+
+def _check_region(object_id, target, region, derived, anchor_links, door_closed, front) -> None:
+    """Raise PartNetLoadError when ``region`` cannot hold an object or is not behind the door."""
+    if region is None or min(region.half_extents) < MIN_REGION_HALF_EXTENT_M:
+        size = None if region is None else [round(2 * h, 3) for h in region.half_extents]
+        hulls = [link for link, why in derived.fallbacks.items() if link in anchor_links and why.startswith(CONVEX_HULL)]
+        cause = (f"link(s) {hulls} stand in as their convex hull ({'; '.join(derived.fallbacks[h] for h in hulls)}), "
+                 "which fills the cavity" if hulls else "the collision pieces may fill it")
+        raise PartNetLoadError(
+            f"{object_id}: found no free cavity behind {target.link} big enough for an object (size {size} m); "
+            f"{cause}: delete the cache directory {derived.urdf.parent} and lower CoacdConfig.threshold, "
+            "or pick another target_link."
+        )
+    if target.is_door:
+        door_inner_face = float((door_closed @ front).min())
+        if float(np.asarray(region.center) @ front) >= door_inner_face:
+            raise PartNetLoadError(
+                f"{object_id}: the free region found is not behind {target.link}; pass target_link= "
+                "or check the object's geometry."
+            )
 
 
 def object_folders(root: Path) -> list[Path]:

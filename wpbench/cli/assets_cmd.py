@@ -166,7 +166,10 @@ def check(
                 notes = "; ".join(f"{link}: {why}" for link, why in asset.extra["collision_fallbacks"].items())
                 line += (f"usable   decomposition {r.seconds:6.1f} s  load {time.perf_counter() - start:5.1f} s  "
                          f"{asset.category} {asset.joint_type} {asset.target_link} opens {reach:.0%} of its range"
-                         + (f"  fallbacks: {notes}" if notes else ""))
+                         + (f"  fallbacks: {notes}" if notes else "")
+                         + (f"  cleared: trimmed {asset.extra['collision_trimmed']} dropped {asset.extra['collision_dropped']}"
+                            if asset.extra["collision_trimmed"] or asset.extra["collision_dropped"] else "")
+                         + (f"  stops short, {asset.extra['reach_blocked_by']}" if asset.extra["reach_blocked_by"] else ""))
         if r.error is not None:
             line += f"refused  decomposition {r.seconds:6.1f} s  {r.error}"
         typer.echo(line)
