@@ -120,8 +120,10 @@ def load_library(
             a folder with ``split.json`` and ``<id>/wpbench.json`` (a generated library),
             or any other folder, read by ``wpbench.assets.partnet.load_partnet_folder``
             (PartNet-Mobility objects; those that fail to load are logged and skipped).
-        split: "train", "val", "test" or None for all. PartNet-Mobility objects carry no
-            split: the split is ignored for them (they are all held-out objects).
+        split: "train", "val", "test" or None for all. A PartNet-Mobility folder with a
+            split file (``wpbench assets split``, ``wpbench.assets.object_split``) gives
+            that split's objects; without one the split is ignored (every object is a
+            held-out object).
         categories: keep only these categories (None: all).
         extra_train: procedural only: that many more training instances per category
             (for training data; the val and test instances are unchanged and can never
@@ -149,11 +151,22 @@ def load_library(
         elif importlib.util.find_spec("wpbench.assets.partnet") is not None:
             from wpbench.assets.partnet import load_partnet_folder
 
-            assets, errors = load_partnet_folder(folder)
+            from wpbench.assets.object_split import split_of_objects
+
+            split_by_id = split_of_objects(folder)
+            only = None
+            if split_by_id is not None and split is not None:
+                only = {object_id for object_id, s in split_by_id.items() if s == split}
+                if not only:
+                    raise ValueError(f"the split file of {folder} puts no object in {split}; rewrite it with other "
+                                     f"fractions (wpbench assets split {folder} --help)")
+            assets, errors = load_partnet_folder(folder, only=only)
             for name, reason in sorted(errors.items()):
                 log.warning("skipped %s: %s", name, reason)
-            if split is not None and any(a.split is not None for a in assets):
-                assets = [a for a in assets if a.split == split]
+            if split_by_id is not None:
+                from dataclasses import replace
+
+                assets = [replace(a, split=split_by_id.get(a.object_id)) for a in assets]
         else:
             raise ValueError(f"{folder} has no split.json and the PartNet-Mobility loader is not available")
         _check_names("category", categories, {a.category for a in assets})

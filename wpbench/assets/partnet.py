@@ -595,8 +595,10 @@ def load_partnet_folder(
     cache_dir: Path | None = None,
     scale_override: dict[str, float] | float | None = None,
     config: PartNetLoadConfig = PartNetLoadConfig(),
+    only: set[str] | None = None,
 ) -> tuple[list[FurnitureAsset], dict[str, str]]:
-    """Load every object folder under ``root`` (or ``root`` itself if it is one object).
+    """Load every object folder under ``root`` (or ``root`` itself if it is one object);
+    with ``only``, just the folders of those names.
 
     Args:
         root: a directory of PartNet-Mobility object folders, or one object folder.
@@ -614,6 +616,8 @@ def load_partnet_folder(
     assets: list[FurnitureAsset] = []
     failures: dict[str, str] = {}
     for folder in object_folders(root):
+        if only is not None and folder.name not in only:
+            continue
         try:
             assets.append(
                 load_partnet_object(

@@ -174,3 +174,31 @@ def check(
             line += f"refused  decomposition {r.seconds:6.1f} s  {r.error}"
         typer.echo(line)
     typer.echo(f"{usable} of {len(results)} objects usable")
+
+
+@app.command()
+def split(
+    folder: Path = typer.Argument(..., help="A folder of PartNet-Mobility objects."),
+    val_fraction: float = typer.Option(0.2, min=0.0, max=0.95, help="Share of each category's objects for val."),
+    test_fraction: float = typer.Option(0.2, min=0.0, max=0.95, help="Share of each category's objects for test (held out)."),
+    seed: int = typer.Option(0, help="Seed of the shuffle within each category."),
+) -> None:
+    """Split FOLDER's objects into train / val / test, whole objects, stratified by category.
+
+    Writes FOLDER/wpbench-splits.json, or $WPBENCH_CACHE/splits/ when FOLDER is read-only;
+    `wpbench run/data generate --assets FOLDER --split S` then use it.
+    """
+    from wpbench.assets.object_split import write_split_file
+
+    try:
+        path, data, skipped = write_split_file(folder, val_fraction, test_fraction, seed)
+    except ValueError as err:
+        _fail(str(err))
+    for name, reason in sorted(skipped.items()):
+        typer.echo(f"left out {reason}")
+    for s in SPLITS:
+        ids = data["splits"][s]
+        by_cat = ", ".join(f"{c} {sum(data['categories'][i] == c for i in ids)}"
+                           for c in sorted({data['categories'][i] for i in ids}))
+        typer.echo(f"{s:<6}{len(ids):>4} objects  {by_cat}")
+    typer.echo(f"wrote {path}")

@@ -29,6 +29,8 @@ def generate(
     extra_train_instances: int = typer.Option(
         0, min=0, help="Train split only: this many more procedural furniture instances per category "
         "(the val instances are unchanged and never trained on)."),
+    assets: str = typer.Option("procedural", help="'procedural' (built-in furniture) or a folder of your own "
+                               "PartNet-Mobility objects split with `wpbench assets split`."),
     progress: bool = typer.Option(True, help="Show a progress bar."),
 ) -> None:
     """Sample (action cloud, anchor cloud, cross-pose) triples into OUT/<split>/ shards + manifest.json.
@@ -49,15 +51,16 @@ def generate(
     shard_size = max(scene_reuse, shard_size - shard_size % scene_reuse)
     if wide_start_probability is None:
         wide_start_probability = 0.5 if split == "train" else 0.0
-    if extra_train_instances and split != "train":
-        typer.echo("Error: --extra-train-instances adds training furniture; use it with --split train", err=True)
+    if extra_train_instances and (split != "train" or assets != "procedural"):
+        typer.echo("Error: --extra-train-instances adds procedural training furniture; use it with --split train "
+                   "and --assets procedural", err=True)
         raise typer.Exit(2)
     try:
         config = GenerationConfig(
             split=split, obs=obs, seed=seed, samples_per_kind=samples_per_kind, kinds=kinds,
             shard_size=shard_size, scene_reuse=scene_reuse, wide_start_probability=wide_start_probability,
             num_action_points=num_action_points, num_anchor_points=num_anchor_points,
-            extra_train_instances=extra_train_instances,
+            extra_train_instances=extra_train_instances, assets=assets,
         )
         report = run_generation(out, config, progress=progress)
     except (ValueError, FileNotFoundError) as err:

@@ -26,12 +26,15 @@ from torch.utils.data import Dataset
 
 from wpbench.data.config import KIND_CODE, KINDS
 from wpbench.data.equivalent_goals import equivalent_goals
-from wpbench.data.manifest import read_manifest
+from wpbench.data.manifest import check_not_test_data, read_manifest
 from wpbench.data.shards import read_shard
 
 
 class CrossPoseDataset(Dataset):
     """Samples of ``kinds`` in ``directory`` (a split directory with a manifest).
+
+    A train/ or val/ directory holding test data, or samples of objects its split file
+    now holds out, is refused (``manifest.check_not_test_data``): training never reads test data.
 
     limit_per_kind: keep only the first N samples of each kind (in manifest order).
     """
@@ -70,6 +73,7 @@ class CrossPoseDataset(Dataset):
         self.categories = [str(c) for c in data["category"]]
         self.object_ids = [str(c) for c in data["object_id"]]
         self.seeds = data["seed"].astype(np.int64)
+        check_not_test_data(self.directory, self.manifest, sorted(set(self.object_ids)))
         self.gt_equivalents = torch.from_numpy(_equivalent_goal_table(data).astype(np.float32))
         if not (len(self.action) == len(self.anchor) == len(self.gt_transform) == len(self.kind)):
             raise ValueError(f"{self.directory}: shard arrays disagree in length")

@@ -126,6 +126,24 @@ def draw_sample(env, config: GenerationConfig, kind: str, index: int) -> dict:
     }
 
 
+def own_objects_config(config: GenerationConfig) -> GenerationConfig:
+    """``config`` with a folder of one's own objects as an absolute path, after checking that
+    the folder has a split (so a train split never takes held-out objects)."""
+    if config.assets == "procedural":
+        return config
+    from dataclasses import replace
+
+    from wpbench.assets.object_split import find_split_file
+
+    folder = Path(config.assets).expanduser()
+    if not folder.is_dir():
+        raise ValueError(f"--assets {config.assets!r} is neither 'procedural' nor an existing folder")
+    if not (folder / "split.json").is_file() and find_split_file(folder) is None:
+        raise ValueError(f"{folder} has no split file, so its test objects cannot be kept out of training data; "
+                         f"run `wpbench assets split {folder}` first")
+    return replace(config, assets=str(folder.resolve()))
+
+
 def generate(
     root: Path,
     config: GenerationConfig,
@@ -135,6 +153,7 @@ def generate(
     """Write the shards of ``config`` under ``root/<split>/`` that do not exist yet, then the manifest."""
     from tqdm import tqdm
 
+    config = own_objects_config(config)
     directory = split_dir(root, config.split)
     todo = [(kind, i) for kind in config.kinds for i in range(config.shards_per_kind())
             if not shard_path(directory, kind, i).is_file()]

@@ -16,7 +16,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from wpbench.data.config import KINDS, GenerationConfig
+from wpbench.data.config import KINDS, SPLITS, GenerationConfig
 from wpbench.data.shards import read_shard
 
 MANIFEST_NAME = "manifest.json"
@@ -31,6 +31,47 @@ def list_shards(directory: Path) -> list[Path]:
     """Complete shard files under a split directory, by kind then index."""
     directory = Path(directory)
     return sorted(p for kind in KINDS for p in (directory / kind).glob("shard-*.npz"))
+
+
+def asset_split_record(assets: str) -> dict | None:
+    """For data made from a folder of one's own objects: its split file, the file's digest and
+    the held-out (test) object ids at generation time; None for the built-in library."""
+    from wpbench.assets.object_split import find_split_file, read_split_file, split_digest
+
+    if assets == "procedural":
+        return None
+    path = find_split_file(Path(assets))
+    if path is None:
+        return None
+    return {"file": str(path.resolve()), "digest": split_digest(path), "test": read_split_file(path)["splits"]["test"]}
+
+
+def check_not_test_data(directory: Path, manifest: dict, object_ids: list[str] | None = None) -> None:
+    """Refuse data that would let a test object into training or model selection.
+
+    ``directory`` named after a split (train/, val/) must hold data generated from that
+    split, never from test; and none of its ``object_ids`` may be a held-out object of
+    the split file the data came from, as that file says now (a split rewritten after the
+    data was made moves objects). ValueError saying what to do.
+    """
+    name = Path(directory).name
+    made_from = manifest.get("split")
+    if name in SPLITS and name != "test" and made_from != name:
+        raise ValueError(f"{directory} holds data generated from the {made_from!r} split, not {name!r}: training and "
+                         f"model selection never read test data; regenerate it with `wpbench data generate --split {name}`")
+    record = manifest.get("asset_split")
+    if name == "test" or not record or object_ids is None:
+        return
+    from wpbench.assets.object_split import read_split_file
+
+    held_out = set(record.get("test", []))
+    if Path(record["file"]).is_file():
+        held_out |= set(read_split_file(Path(record["file"]))["splits"]["test"])
+    leaked = sorted(held_out & set(object_ids))
+    if leaked:
+        raise ValueError(f"{directory} holds samples of held-out (test) objects {leaked[:5]} of {record['file']}; "
+                         "the split was rewritten after the data was made: regenerate the data "
+                         f"(`wpbench data generate --split {name}`) into a new folder")
 
 
 def build_manifest(directory: Path, config: GenerationConfig, generation: dict[str, Any] | None = None) -> dict:
@@ -62,6 +103,7 @@ def build_manifest(directory: Path, config: GenerationConfig, generation: dict[s
         "counts_by_category": {kind: dict(sorted(by_category[kind].items())) for kind in KINDS},
         "content_hash": hashlib.sha256(content.encode()).hexdigest()[:16],
         "generation": generation or {},
+        **({"asset_split": record} if (record := asset_split_record(config.assets)) is not None else {}),
     }
 
 
