@@ -144,3 +144,15 @@ def test_data_from_own_objects_needs_a_split_file(tmp_path):
     done = _wpbench("data", "generate", "--assets", str(objects), "--split", "train", "--out", str(tmp_path / "d"),
                     env=env)
     assert done.returncode == 2 and f"run `wpbench assets split {objects}` first" in done.stderr
+
+
+def test_a_run_uses_the_split_file_only_when_there_is_one(tmp_path, monkeypatch):
+    from wpbench.assets.library import run_split
+
+    monkeypatch.setenv("WPBENCH_CACHE", str(tmp_path / "cache"))
+    objects = tmp_path / "objects"
+    for i in range(3):
+        _write_text_object(objects / f"{100 + i}", "Oven")
+    assert run_split(objects, "test") is None and run_split("procedural", "test") == "test"
+    write_split_file(objects, 0.34, 0.34, seed=0)
+    assert run_split(objects, "test") == "test" and run_split(str(objects), "all") is None

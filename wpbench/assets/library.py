@@ -173,3 +173,15 @@ def load_library(
     if categories is not None:
         assets = [a for a in assets if a.category in categories]
     return assets
+
+
+def run_split(source: str | Path, split: str | None) -> str | None:
+    """The split a run on ``source`` loads: None for "all"; for a folder, ``split`` only when the
+    folder has a split file of its objects (``wpbench assets split``), else None (every object)."""
+    if split in ("all", None):
+        return None
+    if isinstance(source, str) and source == "procedural":
+        return split
+    from wpbench.assets.object_split import find_split_file
+
+    return split if find_split_file(Path(source).expanduser()) is not None else None
