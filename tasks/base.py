@@ -508,7 +508,8 @@ class CrossPoseEnv(BaseEnv):
                       is_still=lambda: np.linalg.norm(body.linear_velocity) < BODY_STILL_LIN
                       and np.linalg.norm(body.angular_velocity) < BODY_STILL_ANG)
         anchor = self.get_obs()["anchor_points"][0].numpy().astype(np.float64)
-        return execute_free_gripper(scene, action, anchor, T)
+        # The robot knows where its own camera stood (the viewpoint of both observation modes).
+        return execute_free_gripper(scene, action, anchor, T, viewpoint=np.asarray(self.view_eye, dtype=np.float64))
 
     def _score_stage(self, state: StageState, T_pred: np.ndarray, result) -> dict[str, Any]:
         from wpbench.geometry import metrics as gm

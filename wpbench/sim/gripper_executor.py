@@ -31,6 +31,7 @@ from wpbench.sim.failure import BLOW_UP, COLLISION, GRASP_MISSED, PLANNING_FAILE
 from wpbench.sim.grasp_choice import Grasp, articulated_grasp, carry_height, suction_point, top_grasp, top_suction_point
 from wpbench.sim.gripper import FINGER_OPEN, FloatingGripper
 from wpbench.sim.screw_path import interpolate, path_length
+from wpbench.sim.side_entry import SidePlan, is_roofed, plan_side_entry
 
 MAX_SPEED = 0.3              # m/s, TCP
 MAX_ANGULAR_SPEED = 1.2      # rad/s, TCP
@@ -49,6 +50,7 @@ SUCTION_SLIP = 0.02          # m: the cup stretched this far has let go
 GRASPS = ("friction", "suction")
 LIFT_HEIGHT = 0.05           # m, lift above the start before carrying
 CARRY_CLEARANCE = 0.03       # m, carry this far above the predicted goal, then lower
+REGRASP_LIFT = 0.03          # m, an object turned in place is lifted this far off the floor
 
 
 @dataclass
@@ -173,7 +175,9 @@ class _Runner:
         g.attach(self.s.ms_scene, body)
         self.holding = True
 
-    def release(self, approach: np.ndarray) -> None:
+    def release(self, approach: np.ndarray, retreat_to: np.ndarray | None = None) -> None:
+        """Let go, back off RETREAT_DISTANCE against ``approach`` (or to the TCP pose
+        ``retreat_to``) and park the hand."""
         g = self.s.gripper
         self.holding = False
         g.detach()
@@ -182,7 +186,10 @@ class _Runner:
         self.wait(RELEASE_SECONDS)
         now = g.tcp_pose()
         back = now.copy()
-        back[:3, 3] -= RETREAT_DISTANCE * approach
+        if retreat_to is None:
+            back[:3, 3] -= RETREAT_DISTANCE * approach
+        else:
+            back[:3, 3] = retreat_to[:3, 3]
         self.line(now, back, check_stall=False)
         g.park()
 
@@ -230,10 +237,63 @@ def execute_articulated_gripper(scene: Scene, action_points: np.ndarray, cross_p
     return _finish(run, _settle(scene), extra)
 
 
+def _abort_free(scene: Scene, run: _Runner, abort: _Abort, extra: dict) -> ExecutionResult:
+    """The hand stops and lets go where it is; the scene is scored as it is."""
+    scene.gripper.detach()
+    scene.gripper.set_fingers(2 * FINGER_OPEN)
+    scene.gripper.park()
+    settled = _settle(scene) if abort.reason != BLOW_UP else ExecutionResult(ok=False)
+    return _finish(run, ExecutionResult(ok=abort.reason != BLOW_UP, reason=abort.reason, detail=str(abort.detail),
+                                        sim_seconds=settled.sim_seconds, at_rest=settled.at_rest), extra)
+
+
+def _turn_in_place(run: _Runner, object_points: np.ndarray, turn: float) -> None:
+    """Regrasp: pick the object by the middle of its top, turn it by ``turn`` (rad) about
+    the vertical, put it down where it was and let go."""
+    top = top_suction_point(object_points)
+    run.grasp(top)
+    lifted = top.tcp.copy()
+    lifted[2, 3] += REGRASP_LIFT
+    turned = lifted.copy()
+    turned[:3, :3] = Rotation.from_rotvec([0.0, 0.0, turn]).as_matrix() @ lifted[:3, :3]
+    down = turned.copy()
+    down[2, 3] = top.tcp[2, 3]
+    for a, b in ((top.tcp, lifted), (lifted, turned), (turned, down)):
+        run.line(a, b)
+    run.release(top.approach)
+
+
+def execute_side_entry(scene: Scene, run: _Runner, object_points: np.ndarray, plan: SidePlan) -> ExecutionResult:
+    """Carry out a side-entry plan (wpbench.sim.side_entry): turn the object first when the
+    plan says so, hold it by the face that looks out of the cavity, carry it to the staging
+    pose, slide it in, lower it, let go, back out the way it came, settle."""
+    waypoints = plan.carry_waypoints()
+    extra = {"grasp_point": plan.pick[:3, 3].round(4).tolist(), "grasp_width": 0.0, "entry": "side",
+             "regrasp_turn_deg": float(np.degrees(plan.regrasp_turn)),
+             "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints]}
+    try:
+        if plan.regrasp_turn:
+            _turn_in_place(run, object_points, plan.regrasp_turn)
+        run.grasp(Grasp(plan.pick, plan.pick[:3, 2].copy(), 0.0))
+        for a, b in zip(waypoints[:-1], waypoints[1:]):
+            run.line(a, b)
+        run.release(plan.goal[:3, 2], retreat_to=plan.retreat())
+    except _Abort as abort:
+        return _abort_free(scene, run, abort, extra)
+    return _finish(run, _settle(scene), extra)
+
+
 def execute_free_gripper(scene: Scene, object_points: np.ndarray, anchor_points: np.ndarray,
-                         cross_pose: np.ndarray) -> ExecutionResult:
-    """Pick the object from above, carry it over the predicted goal, lower it there, release, settle."""
+                         cross_pose: np.ndarray, viewpoint: np.ndarray | None = None) -> ExecutionResult:
+    """Put the object at the predicted goal. Suction, when the observed anchor roofs the
+    goal: from the side through the cavity's opening (wpbench.sim.side_entry), if the
+    observed anchor leaves a way in; otherwise from above. From above: pick the object by its top, carry it over the predicted goal, lower
+    it there, release, settle."""
     run = _Runner(scene, COLLISION, slip_check=True)
+    if scene.grasp_mode == "suction" and is_roofed(object_points, anchor_points, cross_pose):
+        plan = plan_side_entry(object_points, anchor_points, cross_pose, viewpoint)
+        if plan is not None:
+            return execute_side_entry(scene, run, object_points, plan)
     grasp = top_suction_point(object_points) if scene.grasp_mode == "suction" else top_grasp(object_points)
     if grasp is None:
         return _finish(run, ExecutionResult(ok=False, reason=PLANNING_FAILED,
@@ -250,7 +310,7 @@ def execute_free_gripper(scene: Scene, object_points: np.ndarray, anchor_points:
     lifted[2, 3] = travel_z
     above_goal[2, 3] = travel_z
     waypoints = [start, lifted, above_goal, goal]
-    extra = {"grasp_point": start[:3, 3].round(4).tolist(), "grasp_width": grasp.width,
+    extra = {"grasp_point": start[:3, 3].round(4).tolist(), "grasp_width": grasp.width, "entry": "top",
              "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints]}
     try:
         run.grasp(grasp)
@@ -258,10 +318,5 @@ def execute_free_gripper(scene: Scene, object_points: np.ndarray, anchor_points:
             run.line(a, b)
         run.release(grasp.approach)
     except _Abort as abort:
-        scene.gripper.detach()
-        scene.gripper.set_fingers(2 * FINGER_OPEN)
-        scene.gripper.park()
-        settled = _settle(scene) if abort.reason != BLOW_UP else ExecutionResult(ok=False)
-        return _finish(run, ExecutionResult(ok=abort.reason != BLOW_UP, reason=abort.reason, detail=str(abort.detail),
-                                            sim_seconds=settled.sim_seconds, at_rest=settled.at_rest), extra)
+        return _abort_free(scene, run, abort, extra)
     return _finish(run, _settle(scene), extra)
