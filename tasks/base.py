@@ -506,10 +506,21 @@ class CrossPoseEnv(BaseEnv):
                       velocities=lambda: [np.asarray(body.linear_velocity), np.asarray(body.angular_velocity),
                                           np.asarray(body.entity_pose.p)],
                       is_still=lambda: np.linalg.norm(body.linear_velocity) < BODY_STILL_LIN
-                      and np.linalg.norm(body.angular_velocity) < BODY_STILL_ANG)
+                      and np.linalg.norm(body.angular_velocity) < BODY_STILL_ANG,
+                      held_touches_furniture=self._free_object_touches_furniture)
         anchor = self.get_obs()["anchor_points"][0].numpy().astype(np.float64)
         # The robot knows where its own camera stood (the viewpoint of both observation modes).
         return execute_free_gripper(scene, action, anchor, T, viewpoint=np.asarray(self.view_eye, dtype=np.float64))
+
+    def _free_object_touches_furniture(self) -> bool:
+        """The free object is pressed against the furniture (a contact with an impulse)."""
+        mine = self.free_body.entity.per_scene_id
+        furniture = {link.entity.per_scene_id for link in self.furniture.links}
+        for c in self.scene.px.get_contacts():
+            ids = {c.bodies[0].entity.per_scene_id, c.bodies[1].entity.per_scene_id}
+            if mine in ids and ids & furniture and any(np.linalg.norm(p.impulse) > 1e-6 for p in c.points):
+                return True
+        return False
 
     def _score_stage(self, state: StageState, T_pred: np.ndarray, result) -> dict[str, Any]:
         from wpbench.geometry import metrics as gm

@@ -62,6 +62,8 @@ LAZY_COMMANDS: tuple[LazyCommand, ...] = (
         "leaderboard", "wpbench.cli.leaderboard_cmd", "leaderboard",
         "Collect results/**/summary.json into leaderboard md/csv/png.",
     ),
+    LazyCommand("sensitivity", "wpbench.cli.sensitivity_cmd", "sensitivity",
+                "gt under perturbed cross-poses: success against perturbation size (CSV, PNG)."),
 )
 _BY_NAME = {entry.name: entry for entry in LAZY_COMMANDS}
 # ctx.meta flag: set while the top-level help is being formatted.

@@ -27,7 +27,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from wpbench.sim.executor import ExecutionResult, blown_up, simulate_until_still
-from wpbench.sim.failure import BLOW_UP, COLLISION, GRASP_MISSED, PLANNING_FAILED, SLIPPED, STALLED_AGAINST_HINGE
+from wpbench.sim.failure import (BLOW_UP, COLLISION, GRASP_MISSED, PLANNING_FAILED, SLIPPED, STALLED_AGAINST_HINGE,
+                                 UNREACHABLE)
 from wpbench.sim.grasp_choice import Grasp, articulated_grasp, carry_height, suction_point, top_grasp, top_suction_point
 from wpbench.sim.gripper import FINGER_OPEN, FloatingGripper
 from wpbench.sim.screw_path import interpolate, path_length
@@ -50,6 +51,7 @@ SUCTION_SLIP = 0.02          # m: the cup stretched this far has let go
 GRASPS = ("friction", "suction")
 LIFT_HEIGHT = 0.05           # m, lift above the start before carrying
 CARRY_CLEARANCE = 0.03       # m, carry this far above the predicted goal, then lower
+FLOOR_Z = 0.0                # the floor the robot and the furniture stand on: the hand cannot go below it
 REGRASP_LIFT = 0.03          # m, an object turned in place is lifted this far off the floor
 
 
@@ -64,6 +66,7 @@ class Scene:
     timestep: float
     velocities: Callable[[], list[np.ndarray]]   # of the action object (blow-up check, settling)
     is_still: Callable[[], bool]
+    held_touches_furniture: Callable[[], bool] | None = None   # free objects: the held object is pressed against the furniture
 
 
 class _Abort(Exception):
@@ -117,6 +120,9 @@ class _Runner:
             self.s.gripper.set_target(target)
             self.tick()
             if self.holding and self.slip_check and self._slipped():
+                touching = self.s.held_touches_furniture
+                if touching is not None and touching():
+                    raise _Abort(COLLISION, "the furniture stopped the held object and pulled it off the gripper")
                 raise _Abort(SLIPPED, "the object left the gripper while moving")
             if check_stall:
                 d, ang = _pose_distance(self.s.gripper.tcp_pose(), target)
@@ -194,6 +200,15 @@ class _Runner:
         g.park()
 
 
+def _below_floor(poses: np.ndarray) -> bool:
+    """True when a TCP pose (K, 4, 4) of a path lies under the floor."""
+    return bool(np.any(np.asarray(poses).reshape(-1, 4, 4)[:, 2, 3] < FLOOR_Z))
+
+
+def _unreachable(run: "_Runner", extra: dict) -> ExecutionResult:
+    return _finish(run, ExecutionResult(ok=False, reason=UNREACHABLE, detail="the path goes under the floor"), extra)
+
+
 def _finish(run: _Runner, result: ExecutionResult, extra: dict) -> ExecutionResult:
     result.sim_seconds += run.seconds
     result.details.update(extra)
@@ -216,6 +231,8 @@ def execute_articulated_gripper(scene: Scene, action_points: np.ndarray, cross_p
     extra = {"grasp_point": grasp.tcp[:3, 3].round(4).tolist(), "grasp_width": grasp.width}
     path = interpolate(cross_pose, np.linspace(0, 1, 11)) @ grasp.tcp
     extra["planned_path"] = path[:, :3, 3].round(4).tolist()
+    if _below_floor(path):
+        return _unreachable(run, extra)
     try:
         run.grasp(grasp)
         free_joint()   # held by the hand from now on (until then the joint keeps its place)
@@ -271,6 +288,8 @@ def execute_side_entry(scene: Scene, run: _Runner, object_points: np.ndarray, pl
     extra = {"grasp_point": plan.pick[:3, 3].round(4).tolist(), "grasp_width": 0.0, "entry": "side",
              "regrasp_turn_deg": float(np.degrees(plan.regrasp_turn)),
              "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints]}
+    if _below_floor(np.stack(waypoints)):
+        return _unreachable(run, extra)
     try:
         if plan.regrasp_turn:
             _turn_in_place(run, object_points, plan.regrasp_turn)
@@ -287,8 +306,9 @@ def execute_free_gripper(scene: Scene, object_points: np.ndarray, anchor_points:
                          cross_pose: np.ndarray, viewpoint: np.ndarray | None = None) -> ExecutionResult:
     """Put the object at the predicted goal. Suction, when the observed anchor roofs the
     goal: from the side through the cavity's opening (wpbench.sim.side_entry), if the
-    observed anchor leaves a way in; otherwise from above. From above: pick the object by its top, carry it over the predicted goal, lower
-    it there, release, settle."""
+    observed anchor leaves a way in; otherwise from above. From above: pick the object by
+    its top, carry it over the predicted goal, lower it there, release, settle. A path
+    under the floor is ``unreachable``."""
     run = _Runner(scene, COLLISION, slip_check=True)
     if scene.grasp_mode == "suction" and is_roofed(object_points, anchor_points, cross_pose):
         plan = plan_side_entry(object_points, anchor_points, cross_pose, viewpoint)
@@ -312,6 +332,8 @@ def execute_free_gripper(scene: Scene, object_points: np.ndarray, anchor_points:
     waypoints = [start, lifted, above_goal, goal]
     extra = {"grasp_point": start[:3, 3].round(4).tolist(), "grasp_width": grasp.width, "entry": "top",
              "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints]}
+    if _below_floor(np.stack(waypoints)):
+        return _unreachable(run, extra)
     try:
         run.grasp(grasp)
         for a, b in zip(waypoints[:-1], waypoints[1:]):
