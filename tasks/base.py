@@ -106,7 +106,7 @@ class CrossPoseEnv(BaseEnv):
         extra_train_instances: int = 0,
         robot_uids=None,
         executor: str = "ideal",
-        grasp: str = "friction",
+        grasp: str = "suction",
         **kwargs,
     ):
         if obs_mode not in OBS_MODES:
