@@ -6,6 +6,7 @@ when used, so ``wpbench --help`` stays fast and never imports torch or SAPIEN:
 | command       | module                       | object |
 |---------------|------------------------------|--------|
 | `run`         | `wpbench.cli.run_cmd`        | `run` (a function) |
+| `merge`       | `wpbench.cli.merge_cmd`      | `merge` (a function) |
 | `assets`      | `wpbench.cli.assets_cmd`     | `app` (typer) |
 | `data`        | `wpbench.cli.data_cmd`       | `app` (typer) |
 | `train`       | `wpbench.cli.train_cmd`      | `app` (typer) |
@@ -52,6 +53,7 @@ class LazyCommand:
 
 LAZY_COMMANDS: tuple[LazyCommand, ...] = (
     LazyCommand("run", "wpbench.cli.run_cmd", "run", "Run a policy on a task in simulation and score it."),
+    LazyCommand("merge", "wpbench.cli.merge_cmd", "merge", "Join the shards of a run (run --shard i/N) into one."),
     LazyCommand("assets", "wpbench.cli.assets_cmd", "app", "List, build and inspect furniture assets."),
     LazyCommand("data", "wpbench.cli.data_cmd", "app", "Generate training data from the simulator."),
     LazyCommand("train", "wpbench.cli.train_cmd", "app", "Train the cross-pose models."),

@@ -34,8 +34,13 @@ def run(
         None, min=1, help="Worker processes running episodes side by side [default: the number of cores; "
                           "1 with --record]. The records are the same whatever the number."),
     ray: str = typer.Option(
-        None, "--ray", help="Run the episodes on a Ray cluster: 'auto' for the one this machine belongs to, "
-                            "'local' to start one here, or an address (host:port)."),
+        None, "--ray", metavar="ADDRESS",
+        help="Run the episodes on a Ray cluster: 'local' starts one on this machine, 'auto' joins the one this "
+             "machine belongs to, HOST:PORT another one. --workers then caps the actors (default: one per CPU "
+             "of the cluster)."),
+    shard: str = typer.Option(
+        None, metavar="I/N", help="Run only the episodes whose index is I modulo N (job arrays), into a folder of "
+                                  "its own; join the shards with `wpbench merge`."),
     executor: str = typer.Option("ideal", help=f"How a predicted cross-pose is carried out: "
                                                f"{', '.join(names.EXECUTORS)}."),
     weights_root: Path = typer.Option(
@@ -62,6 +67,13 @@ def run(
     check_choice("split", split, names.RUN_SPLITS)
     check_choice("observation mode", obs, names.OBS_MODES)
     check_choice("executor", executor, names.EXECUTORS)
+    if shard is not None:
+        from wpbench.evaluation.runner import parse_shard
+
+        try:
+            parse_shard(shard)
+        except ValueError as err:
+            raise typer.BadParameter(str(err)) from None
     if record is not None:
         if workers not in (None, 1) or ray is not None:
             raise typer.BadParameter("--record needs the episodes in this process: use --workers 1 without --ray")
@@ -89,7 +101,8 @@ def run(
 
     cfg = RunConfig(policy=policy, task=task, split=split, episodes=episodes, seed=seed, assets=assets,
                     obs=obs, out=out, resume=resume, record=record, num_action_points=num_action_points,
-                    num_anchor_points=num_anchor_points, policy_kwargs=policy_kwargs, executor=executor)
+                    num_anchor_points=num_anchor_points, policy_kwargs=policy_kwargs, executor=executor,
+                    shard=shard)
     if out is None and weights_root is not None:
         # Keep an experiment's runs beside its weights, away from the shipped results/runs/.
         cfg.out = weights_root / "runs" / cfg.default_out().name
@@ -100,7 +113,7 @@ def run(
         observer = RerunRecorder(record, application=f"wpbench {policy} {task}")
     from wpbench.evaluation.local_workers import available_cores
 
-    count = 1 if record is not None else (workers or available_cores())
+    count = 1 if record is not None else workers if ray is not None else (workers or available_cores())
     summary = execute(lambda: run_benchmark(cfg, progress=progress, observer=observer, workers=count,
                                             use_ray=ray is not None, ray_address=ray_address(ray)),
                       out_dir=cfg.out or cfg.default_out(), finally_=observer.close if observer else None)

@@ -91,8 +91,15 @@ class RunFolder:
             self.lock.release()
             raise
         done = self.writer.completed_episodes()
-        self.todo = [i for i in range(self.cfg.episodes) if i not in done]
-        beyond = sorted(i for i in done if i >= self.cfg.episodes)
+        planned = self.cfg.episode_indices()
+        self.todo = [i for i in planned if i not in done]
+        beyond = sorted(set(done) - set(planned))
+        if self.cfg.shard is not None and any(i < self.cfg.episodes for i in beyond):
+            from wpbench.evaluation.records import RunMismatchError
+
+            self.close()
+            raise RunMismatchError(f"{self.out} holds episodes of another shard than {self.cfg.shard}; "
+                                   "use the shard's own folder")
         if beyond:
             self.notes.append(
                 f"{self.out} holds {len(done)} episodes, more than the {self.cfg.episodes} asked for; its "
@@ -112,7 +119,7 @@ class RunFolder:
         cfg = self.cfg
         meta = {
             "policy": cfg.policy, "task": cfg.task, "split": cfg.split, "asset_source": cfg.assets,
-            "obs": cfg.obs, "seed": cfg.seed, "executor": cfg.executor,
+            "obs": cfg.obs, "seed": cfg.seed, "executor": cfg.executor, "shard": cfg.shard,
             # Episode times come from the records, so a resumed run reports the whole run;
             # peak memory is this session's (a resumed run keeps its largest session's).
             "timings": {"wall_s": float(sum(r.get("timings", {}).get("episode_s", 0.0) for r in records)),
@@ -207,7 +214,7 @@ def run_many(
             folder.abandon()
         raise
     jobs = [Job(number, folder.cfg, index) for number, folder in enumerate(folders) for index in folder.todo]
-    total = sum(max(folder.cfg.episodes, len(folder.writer.records)) for folder in folders)
+    total = sum(len(folder.todo) + len(folder.writer.records) for folder in folders)
     first = cfgs[0] if cfgs else None
     label = description or (f"{first.policy} {first.task}" if len(cfgs) == 1 else f"{len(cfgs)} runs")
     bar = tqdm(total=total, initial=total - len(jobs), disable=not progress, desc=label, unit="ep",

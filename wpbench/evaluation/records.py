@@ -77,8 +77,10 @@ RESUME_MAY_DIFFER: frozenset[str] = frozenset(
     {"episodes", "num_episodes", "resume", "out_dir", "out", "record", "render", "progress", "workers"}
 )
 # Run-config keys added after runs were first written: a run.json without one of them
-# was written with this value (None: not known, so not compared).
-RESUME_DEFAULTS: dict[str, Any] = {"executor": "ideal", "assets_digest": None}
+# was written with this value ...
+RESUME_DEFAULTS: dict[str, Any] = {"executor": "ideal", "shard": None}
+# ... or, for these, with a value nobody knows (not compared).
+RESUME_UNKNOWN_IF_MISSING: frozenset[str] = frozenset({"assets_digest"})
 # Record keys that must equal the run config's value of the same name.
 RECORD_CONFIG_KEYS: tuple[str, ...] = ("policy", "task", "split", "obs")
 
@@ -220,9 +222,9 @@ def _config_differences(stored: Mapping[str, Any], requested: Mapping[str, Any])
     keys = (set(stored) | set(requested)) - RESUME_MAY_DIFFER
     differences = []
     for key in sorted(keys):
-        old = stored[key] if key in stored else RESUME_DEFAULTS.get(key)
-        if key not in stored and key in RESUME_DEFAULTS and RESUME_DEFAULTS[key] is None:
+        if key not in stored and key in RESUME_UNKNOWN_IF_MISSING:
             continue  # an older run.json that did not record it: nothing to compare
+        old = stored[key] if key in stored else RESUME_DEFAULTS.get(key)
         if old != requested.get(key):
             differences.append(f"{key}: stored {old!r}, requested {requested.get(key)!r}")
     return differences

@@ -51,10 +51,37 @@ class RunConfig:
     num_anchor_points: int = 1024
     policy_kwargs: dict = field(default_factory=dict)
     executor: str = "ideal"
+    shard: str | None = None  # "i/N": only the episodes whose index is i modulo N
 
-    def default_out(self) -> Path:
+    def default_out(self, results: Path | str = "results") -> Path:
+        """``<results>/runs/<policy>__<task>__<split>__<assets>__<obs>`` (plus ``__<executor>``
+        for another executor than the ideal one, ``__shard<i>of<N>`` for a shard)."""
         source = "procedural" if self.assets == "procedural" else Path(self.assets).name
-        return Path("results") / "runs" / f"{self.policy}__{self.task}__{self.split}__{source}__{self.obs}"
+        name = f"{self.policy}__{self.task}__{self.split}__{source}__{self.obs}"
+        if self.executor != "ideal":
+            name += f"__{self.executor}"
+        if self.shard is not None:
+            index, count = parse_shard(self.shard)
+            name += f"__shard{index}of{count}"
+        return Path(results) / "runs" / name
+
+    def episode_indices(self) -> list[int]:
+        """The episodes of this run (of its shard, if it is one), in order."""
+        if self.shard is None:
+            return list(range(self.episodes))
+        index, count = parse_shard(self.shard)
+        return [i for i in range(self.episodes) if i % count == index]
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    """``"i/N"`` -> ``(i, N)`` with 0 <= i < N; ValueError saying the form otherwise."""
+    try:
+        index, count = (int(part) for part in str(text).split("/"))
+    except ValueError:
+        raise ValueError(f"--shard must look like i/N (e.g. 0/4), got {text!r}") from None
+    if count < 1 or not 0 <= index < count:
+        raise ValueError(f"--shard i/N needs 0 <= i < N, got {text!r}")
+    return index, count
 
 
 def episode_seed(base_seed: int, episode: int) -> int:
@@ -69,8 +96,10 @@ def make_env(cfg: RunConfig):
     from wpbench.names import import_task
 
     info = import_task(cfg.task)  # registers the task's env with gymnasium
-    # Real PartNet-Mobility folders have no split: every object is unseen furniture.
-    split = None if cfg.assets != "procedural" or cfg.split in ("all", None) else cfg.split
+    from wpbench.assets.library import run_split
+
+    # A folder of real objects without a split file: every object is unseen furniture.
+    split = run_split(cfg.assets, cfg.split)
     # The ideal executor is the env's own default: naming it keeps envs that take no
     # executor argument working.
     executor = {} if cfg.executor == "ideal" else {"executor": cfg.executor}
@@ -299,7 +328,7 @@ def run_benchmark(
     policy=None,
     observer=None,
     on_episode: Callable[[dict], None] | None = None,
-    workers: int = 1,
+    workers: int | None = 1,
     ray_address: str | None = None,
     use_ray: bool = False,
 ) -> dict[str, Any]:
@@ -308,12 +337,13 @@ def run_benchmark(
     ``workers``: 1 runs the episodes in this process (``policy`` and ``observer`` objects
     are only usable then); more runs them in that many worker processes. ``use_ray``: run
     them on a Ray cluster instead (``ray_address`` ``"auto"`` for an existing one, None
-    for a local one). The records are the same whichever runs them.
+    for a local one; ``workers`` None: one actor per CPU of the cluster). The records are
+    the same whichever runs them.
     """
     from wpbench.evaluation.driver import run_many
     from wpbench.evaluation.pools import make_pool
 
-    if (policy is not None or observer is not None) and (workers != 1 or use_ray):
+    if (policy is not None or observer is not None) and (workers not in (None, 1) or use_ray):
         raise ValueError("a policy object or an observer (--record) needs the episodes in this process: --workers 1")
     pool = make_pool(workers=workers, use_ray=use_ray, ray_address=ray_address, policy=policy, observer=observer)
     return run_many([cfg], pool, policies={0: policy} if policy is not None else None, progress=progress,

@@ -1,0 +1,233 @@
+"""Episodes on a Ray cluster (``wpbench run --ray [ADDRESS]``).
+
+The same scheme as :mod:`wpbench.evaluation.local_workers`, with Ray actors in place
+of processes: one actor per CPU of the cluster (one CPU each), each building a run's
+env and policy once and running one episode at a time; the driver writes every record,
+so the nodes need no shared file system. What an episode needs beyond the installed
+package travels with the tasks through Ray's object store: the trained weights of a
+weighted policy and a PartNet-Mobility ``--assets`` folder are put there once per run
+as bytes and unpacked once per node into a folder named by their content hash. (The
+built-in furniture is generated on each node from the package: same code, same seed,
+same furniture.)
+
+An actor that dies takes its episode with it: that episode goes to a new actor once,
+and is recorded as a failure with the reason if it dies again. Each record's
+``ran_on`` names the Ray node that ran it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import io
+import os
+import tarfile
+import tempfile
+from collections import deque
+from pathlib import Path
+from typing import Any, Iterator, Sequence
+
+from wpbench.evaluation.local_workers import POLL_S, RETRIES, WorkerError, set_thread_count
+
+__all__ = ["RayPool", "pack_folder", "unpack_folder", "ray_available"]
+
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
+SINGLE_MACHINE_VARIABLE = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+ACTOR_DEATH_REASON = f"Ray actor died while running this episode, {RETRIES + 1} times"
+
+
+def ray_available() -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec("ray") is not None
+
+
+def pack_folder(folder: str | os.PathLike[str]) -> tuple[str, bytes]:
+    """``(sha256 of the archive, tar archive of folder)``, hidden entries left out, entries
+    in sorted order with fixed times and owners, so equal contents give equal archives."""
+    root = Path(folder)
+    buffer = io.BytesIO()
+    with tarfile.open(fileobj=buffer, mode="w") as archive:
+        for path in sorted(root.rglob("*")):
+            relative = path.relative_to(root)
+            if any(part.startswith(".") for part in relative.parts) or not path.is_file():
+                continue
+            info = archive.gettarinfo(str(path), arcname=relative.as_posix())
+            info.mtime, info.uid, info.gid, info.uname, info.gname = 0, 0, 0, "", ""
+            with open(path, "rb") as handle:
+                archive.addfile(info, handle)
+    data = buffer.getvalue()
+    return hashlib.sha256(data).hexdigest(), data
+
+
+def unpack_folder(digest: str, data: bytes, root: Path | None = None) -> Path:
+    """The folder ``data`` (from :func:`pack_folder`) unpacked under ``root`` (default: the
+    temporary folder), named by its digest; unpacked once per machine (atomically)."""
+    root = Path(root or Path(tempfile.gettempdir()) / "wpbench-ray")
+    target = root / digest
+    if target.is_dir():
+        return target
+    root.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(dir=root, prefix=f".{digest[:12]}-"))
+    with tarfile.open(fileobj=io.BytesIO(data), mode="r") as archive:
+        archive.extractall(staging, filter="data")
+    try:
+        os.rename(staging, target)
+    except OSError:  # another actor on this node was first
+        import shutil
+
+        shutil.rmtree(staging, ignore_errors=True)
+    return target
+
+
+def _shipped_folders(cfg) -> dict[str, Path]:
+    """What of run ``cfg`` lives outside the package: its weights root and asset folder."""
+    from wpbench import names
+
+    folders = {}
+    if cfg.policy in names.WEIGHTED_POLICIES:
+        from wpbench.weights import weights_root_or_shipped
+
+        folders["weights_root"] = weights_root_or_shipped(cfg.policy_kwargs.get("weights_root"))
+    if cfg.assets != "procedural":
+        folders["assets"] = Path(cfg.assets)
+    return folders
+
+
+class EpisodeActor:
+    """A Ray actor running episodes; see the module docstring."""
+
+    def __init__(self, threads: int) -> None:
+        set_thread_count(threads)
+        self.session, self.current = None, None
+
+    def run(self, run: int, cfg, index: int, shipped: list) -> dict[str, Any]:
+        import ray
+
+        from wpbench.evaluation.runner import EpisodeSession
+
+        if self.current != run:
+            if self.session is not None:
+                self.session.close()
+            self.session, self.current = None, None
+            local = {}
+            for name, digest, reference in shipped:
+                local[name] = str(unpack_folder(digest, ray.get(reference)))
+            if "weights_root" in local:
+                cfg = dataclasses.replace(cfg, policy_kwargs={**cfg.policy_kwargs, "weights_root": local["weights_root"]})
+            if "assets" in local:
+                cfg = dataclasses.replace(cfg, assets=local["assets"])
+            self.session, self.current = EpisodeSession(cfg), run
+        record = self.session.run(index)
+        record["ran_on"]["node"] = ray.get_runtime_context().get_node_id()
+        return record
+
+    def close(self) -> None:
+        if self.session is not None:
+            self.session.close()
+
+
+class RayPool:
+    """Episodes on the Ray cluster at ``address`` ("auto": the running one; None: start a
+    local one with ``num_cpus`` CPUs, on 127.0.0.1). ``workers``: actors to use
+    (default: the cluster's CPUs)."""
+
+    def __init__(self, address: str | None = None, workers: int | None = None, num_cpus: int | None = None) -> None:
+        if not ray_available():
+            raise ValueError("--ray needs Ray: pip install 'ray==2.*' (scripts/setup.sh installs it)")
+        self.address = address
+        self.workers = workers
+        self.num_cpus = num_cpus
+        self._actors: list[Any] = []
+        self._started_ray = False
+        self.started = 0
+
+    def _connect(self) -> None:
+        host = (self.address or "127.0.0.1").rsplit(":", 1)[0]
+        if host in LOOPBACK_HOSTS:
+            # Ray turns a loopback address into this machine's network address before
+            # connecting, unless told the cluster is this machine alone (read when ray is
+            # first imported): a cluster on 127.0.0.1 stays on 127.0.0.1.
+            os.environ.setdefault(SINGLE_MACHINE_VARIABLE, "0")
+        import ray
+
+        if ray.is_initialized():
+            return
+        options = dict(include_dashboard=False, log_to_driver=False, configure_logging=False)
+        if self.address is None:
+            ray.init(num_cpus=self.num_cpus, _node_ip_address="127.0.0.1", **options)
+        else:
+            ray.init(address=self.address, **options)
+        self._started_ray = True
+
+    def _new_actor(self):
+        import ray
+
+        actor_class = ray.remote(num_cpus=1, max_restarts=0)(EpisodeActor)
+        self.started += 1
+        actor = actor_class.remote(1)
+        self._actors.append(actor)
+        return actor
+
+    def run(self, jobs: Sequence[Any], stop) -> Iterator[tuple[Any, dict[str, Any]]]:
+        import ray
+        from ray.exceptions import RayActorError, RayTaskError
+
+        from wpbench.evaluation.runner import failure_record
+
+        if not jobs:
+            return
+        self._connect()
+        shipped: dict[int, list] = {}
+        for job in jobs:
+            if job.run not in shipped:
+                shipped[job.run] = []
+                for name, folder in _shipped_folders(job.cfg).items():
+                    digest, data = pack_folder(folder)
+                    shipped[job.run].append((name, digest, ray.put(data)))
+        capacity = int(ray.cluster_resources().get("CPU", 1))
+        count = min(self.workers or capacity, capacity, len(jobs))
+        idle = deque(self._new_actor() for _ in range(count))
+        pending = deque(range(len(jobs)))
+        attempts = [0] * len(jobs)
+        in_flight: dict[Any, tuple[Any, int]] = {}
+        while pending or in_flight:
+            while not stop and pending and idle:
+                actor, job_id = idle.popleft(), pending.popleft()
+                job = jobs[job_id]
+                attempts[job_id] += 1
+                in_flight[actor.run.remote(job.run, job.cfg, job.index, shipped[job.run])] = (actor, job_id)
+            if stop and not in_flight:
+                break
+            ready, _ = ray.wait(list(in_flight), num_returns=1, timeout=POLL_S)
+            for reference in ready:
+                actor, job_id = in_flight.pop(reference)
+                try:
+                    record = ray.get(reference)
+                except RayActorError:
+                    self._actors.remove(actor)
+                    if attempts[job_id] > RETRIES:
+                        job = jobs[job_id]
+                        yield job, failure_record(job.cfg, job.index, ACTOR_DEATH_REASON)
+                    else:
+                        pending.appendleft(job_id)
+                    if pending and not stop:
+                        idle.append(self._new_actor())
+                    continue
+                except RayTaskError as err:
+                    raise WorkerError(str(err.cause) if err.cause is not None else str(err)) from None
+                idle.append(actor)
+                yield jobs[job_id], record
+
+    def close(self) -> None:
+        import ray
+
+        for actor in self._actors:
+            try:
+                ray.kill(actor)
+            except Exception:  # noqa: BLE001 - already gone
+                pass
+        self._actors = []
+        if self._started_ray:
+            ray.shutdown()
+            self._started_ray = False
