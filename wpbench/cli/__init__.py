@@ -7,6 +7,7 @@ when used, so ``wpbench --help`` stays fast and never imports torch or SAPIEN:
 |---------------|------------------------------|--------|
 | `run`         | `wpbench.cli.run_cmd`        | `run` (a function) |
 | `merge`       | `wpbench.cli.merge_cmd`      | `merge` (a function) |
+| `sweep`       | `wpbench.cli.sweep_cmd`      | `sweep` (a function) |
 | `assets`      | `wpbench.cli.assets_cmd`     | `app` (typer) |
 | `data`        | `wpbench.cli.data_cmd`       | `app` (typer) |
 | `train`       | `wpbench.cli.train_cmd`      | `app` (typer) |
@@ -53,6 +54,8 @@ class LazyCommand:
 
 LAZY_COMMANDS: tuple[LazyCommand, ...] = (
     LazyCommand("run", "wpbench.cli.run_cmd", "run", "Run a policy on a task in simulation and score it."),
+    LazyCommand("sweep", "wpbench.cli.sweep_cmd", "sweep",
+                "Run every combination of policies, tasks, ... at once, then the leaderboard."),
     LazyCommand("merge", "wpbench.cli.merge_cmd", "merge", "Join the shards of a run (run --shard i/N) into one."),
     LazyCommand("assets", "wpbench.cli.assets_cmd", "app", "List, build and inspect furniture assets."),
     LazyCommand("data", "wpbench.cli.data_cmd", "app", "Generate training data from the simulator."),
