@@ -24,10 +24,12 @@ from pathlib import Path
 
 from wpbench.models.configs import DEFAULT_MIRROR_VIEWS, DEFAULT_SUBSETS
 
-POLICIES = ("gf", "tp", "oracle", "wp-og", "wp-postsvd", "wp-postsvd-t")
-TASKS = ("open-door", "place-in", "open-then-place")
-KINDS = ("free-floating", "articulated")
-SPLITS = ("train", "val")
+from wpbench.names import ARTICULATED, BUILTIN_TASKS, FREE, WEIGHTED_POSE_VARIANTS
+
+POLICIES = ("gf", "tp", "oracle", *WEIGHTED_POSE_VARIANTS)
+TASKS = BUILTIN_TASKS
+KINDS = (FREE, ARTICULATED)  # the paper's column order
+SPLITS = ("train", "val")    # data splits whose pose errors the table reports
 REAL_SOURCE = "partnet-mobility"  # the run-directory name of ../shared/partnet-mobility
 
 
