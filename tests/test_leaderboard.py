@@ -169,5 +169,60 @@ def test_the_executor_is_a_column_and_older_runs_count_as_ideal(tmp_results):
                                                             "executor": "gripper"}))
     frame, _ = collect_summaries(tmp_results, sort_by="policy")
     assert sorted(frame["executor"]) == ["gripper", "ideal"]
-    header = leaderboard_markdown(frame).splitlines()[6]
+    header = next(line for line in leaderboard_markdown(frame).splitlines() if line.startswith("| task"))
     assert [cell.strip() for cell in header.split("|")][5:7] == ["obs", "executor"]
+
+
+def _episode(index, object_id, success, reason=""):
+    stage = {"kind": "articulated", "success": success, "failure_reason": "" if success else reason}
+    return {"episode": index, "seed": index, "task": "open-door", "policy": "p", "object_id": object_id,
+            "category": "oven", "success": success, "stages": [stage],
+            "rot_err_deg": 1.0, "trans_err_m": 0.01, "point_err_m": 0.01, "point_mse": 1e-4}
+
+
+def test_instances_their_interval_and_the_most_common_failure_reach_the_leaderboard(tmp_results):
+    # Four instances, five episodes each; two instances always fail. Outcomes cluster by
+    # instance, so the instance interval must be wider than the Wilson one.
+    records = []
+    for i in range(20):
+        object_id = f"oven-{i % 4}"
+        ok = i % 4 < 2
+        records.append(_episode(i, object_id, ok, "not_open_enough" if i % 2 else "slipped"))
+    records[2]["stages"][0]["failure_reason"] = "policy error: RuntimeError: boom"
+    summary = summarize(records, {"split": "val", "asset_source": "procedural"})
+    assert summary["objects"] == 4
+    assert summary["failure_reasons"] == {"not_open_enough": 5, "slipped": 4, "policy error": 1}
+    wilson_low, wilson_high = summary["success_ci95"]
+    low, high = summary["success_instance_ci95"]
+    assert high - low > wilson_high - wilson_low
+    assert 0.0 <= low < 0.5 < high <= 1.0
+    write_summary(tmp_results / "run", summary)
+    frame, _ = collect_summaries(tmp_results)
+    row = frame.iloc[0]
+    assert row["instances"] == 4 and row["top_failure"] == "not_open_enough"
+    assert row["success_instance_ci95_low"] == low
+    table = leaderboard_markdown(frame)
+    assert f"[{100 * low:.1f}, {100 * high:.1f}]" in table and "not_open_enough" in table
+
+
+def test_refresh_recomputes_an_old_summary_from_its_episodes(tmp_path, wpbench_exe):
+    import json
+    import subprocess
+    run = tmp_path / "results" / "old-run"
+    records = [_episode(i, f"oven-{i % 2}", i % 2 == 0, "slipped") for i in range(6)]
+    write_summary(run, summarize(records, {"split": "val", "asset_source": "procedural", "obs": "mesh",
+                                           "timings": {"peak_rss_mib": 512.0}}))
+    (run / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    old = json.loads((run / "summary.json").read_text())
+    for key in ("success_instance_ci95", "failure_reasons"):
+        del old[key]
+    old["format_version"] = 1
+    (run / "summary.json").write_text(json.dumps(old))
+    result = subprocess.run([str(wpbench_exe), "leaderboard", "--results", str(tmp_path / "results"),
+                             "--refresh", "--quiet"], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    new = json.loads((run / "summary.json").read_text())
+    assert new["format_version"] == 2 and new["failure_reasons"] == {"slipped": 3}
+    assert new["meta"]["obs"] == "mesh" and new["timings"]["run"]["peak_rss_mib"] == 512.0
+    assert new["created_utc"] == old["created_utc"]
+    assert "slipped" in (tmp_path / "results" / "leaderboard.md").read_text()

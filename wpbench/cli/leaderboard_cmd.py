@@ -22,14 +22,23 @@ def leaderboard(
         help="Row order: " + ", ".join(SORT_CHOICES) + " (success: by task, best first).",
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Do not print the table."),
+    refresh: bool = typer.Option(
+        False, "--refresh",
+        help="First recompute every summary.json from its episodes.jsonl (after a summary format change).",
+    ),
 ) -> None:
     """Collect results/**/summary.json into results/leaderboard.md, .csv and .png."""
-    from wpbench.evaluation.leaderboard import write_leaderboard
+    from wpbench.evaluation.leaderboard import find_summaries, write_leaderboard
+    from wpbench.evaluation.summary import refresh_summary
 
     def warn(text: str) -> None:
         typer.echo(f"warning: {text}", err=True)
 
     try:
+        if refresh:
+            for path in find_summaries(results):
+                if (path.parent / "episodes.jsonl").is_file():
+                    refresh_summary(path.parent)
         files = write_leaderboard(results, out_dir=out, sort_by=sort_by, on_warning=warn)
     except FileNotFoundError as error:
         typer.echo(f"Error: {error}", err=True)

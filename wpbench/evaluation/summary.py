@@ -15,7 +15,11 @@ The result is a public format read by the leaderboard; its keys:
 - ``per_category``: ``{category: {"episodes", "successes", "success_rate",
   "success_ci95", "rot_err_deg_mean", "trans_err_m_mean", "point_err_m_mean",
   "nan_count"}}``
-- ``objects``: number of distinct ``object_id``
+- ``objects``: number of distinct ``object_id`` (the furniture instances)
+- ``success_instance_ci95`` [low, high]: a 95 % interval that resamples instances, not
+  episodes (``wpbench.evaluation.intervals``); episodes of one instance are not independent
+- ``failure_reasons``: ``{reason: count}`` over the failed episodes, most common first
+  (:func:`episode_failure_reason`)
 - ``timings``: per-episode ``{name: {"mean_s", "median_s", "total_s"}}`` from the
   records' ``timings`` dicts, plus ``"run"``: ``meta["timings"]`` if given
 - ``meta``: the remaining run configuration
@@ -34,6 +38,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from wpbench.evaluation.intervals import instance_bootstrap_interval
 from wpbench.evaluation.records import ERROR_KEYS, dumps_json, records_from
 
 __all__ = [
@@ -41,14 +46,16 @@ __all__ = [
     "SUMMARY_FORMAT_VERSION",
     "Z_95",
     "wilson_interval",
+    "episode_failure_reason",
     "summarize",
     "write_summary",
+    "refresh_summary",
     "load_summary",
     "format_summary_table",
 ]
 
 SUMMARY_FILE = "summary.json"
-SUMMARY_FORMAT_VERSION = 1
+SUMMARY_FORMAT_VERSION = 2  # 2: success_instance_ci95 and failure_reasons
 # Two-sided 95 % normal quantile.
 Z_95 = 1.959963984540054
 
@@ -75,6 +82,20 @@ def wilson_interval(successes: int, n: int, z: float = Z_95) -> tuple[float, flo
     low = 0.0 if successes == 0 else max(0.0, centre - half_width)
     high = 1.0 if successes == n else min(1.0, centre + half_width)
     return (low, high)
+
+
+def episode_failure_reason(record: Mapping[str, Any]) -> str:
+    """Why a failed episode failed: its own ``failure_reason`` (the episode could not run),
+    else that of its first failed stage. A reason with details ("policy error: ...") counts
+    by the part before the colon. "unknown" when nothing says."""
+    reason = record.get("failure_reason") or ""
+    if not reason:
+        for stage in record.get("stages") or []:
+            if isinstance(stage, Mapping) and not stage.get("success") and stage.get("failure_reason"):
+                reason = stage["failure_reason"]
+                break
+    reason = str(reason).split(":", 1)[0].strip()
+    return reason or "unknown"
 
 
 def _nan_to_none(value: float | None) -> float | None:
@@ -195,6 +216,18 @@ def summarize(
             }
     summary["per_category"] = per_category
     summary["objects"] = int(frame["object_id"].nunique()) if n and "object_id" in frame.columns else 0
+    if n and "object_id" in frame.columns:
+        instances = frame["object_id"].fillna("unknown").astype(str).tolist()
+        low, high = instance_bootstrap_interval(success.tolist(), instances)
+        summary["success_instance_ci95"] = [_nan_to_none(low), _nan_to_none(high)]
+    else:
+        summary["success_instance_ci95"] = [None, None]
+    reasons: dict[str, int] = {}
+    for row, ok, nan_error in zip(rows, success.tolist(), error_is_nan.tolist()):
+        if not ok:
+            reason = "nan_pose_error" if nan_error and row.get("success") else episode_failure_reason(row)
+            reasons[reason] = reasons.get(reason, 0) + 1
+    summary["failure_reasons"] = dict(sorted(reasons.items(), key=lambda item: (-item[1], item[0])))
 
     summary["timings"] = _timings(rows, meta.get("timings"))
     summary["meta"] = {
@@ -231,6 +264,26 @@ def write_summary(out_dir: str | os.PathLike[str], summary: Mapping[str, Any]) -
     temporary.write_text(dumps_json(summary, indent=2) + "\n", encoding="utf-8")
     os.replace(temporary, path)
     return path
+
+
+def refresh_summary(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
+    """Recompute ``<run_dir>/summary.json`` from its ``episodes.jsonl`` in the current format.
+
+    The run's configuration, run timings and peak memory are kept from the old summary
+    (they are not in the records); every number derived from the episodes is recomputed.
+    """
+    run_dir = Path(run_dir)
+    old = load_summary(run_dir)
+    meta = dict(old.get("meta") or {})
+    for key in (*_IDENTITY_KEYS, "seed"):
+        meta[key] = old.get(key)
+    run_timings = (old.get("timings") or {}).get("run")
+    if run_timings:
+        meta["timings"] = run_timings
+    summary = summarize(run_dir / "episodes.jsonl", meta)
+    summary["created_utc"] = old.get("created_utc", summary["created_utc"])
+    write_summary(run_dir, summary)
+    return summary
 
 
 def load_summary(path: str | os.PathLike[str]) -> dict[str, Any]:
