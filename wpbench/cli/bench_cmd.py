@@ -90,3 +90,22 @@ def episodes(
         policy=policy,
         json_path=json_path,
     )
+
+
+@app.command()
+def workers(
+    episodes: int = typer.Option(100, min=4, help="Episodes per schedule (1 worker, 2 workers, Ray with 2)."),
+    policy: str = typer.Option("wp", help="Policy to run."),
+    task: str = typer.Option("open-then-place", help="Task to run."),
+    obs: str = typer.Option("mesh", help="Observation mode."),
+    json_path: Optional[Path] = typer.Option(None, "--json", help=_JSON_HELP),
+) -> None:
+    """Episodes per minute with 1 and 2 workers, Ray's overhead per episode, and a scaling model."""
+    from wpbench.cli.choices import check_choice
+    from wpbench.names import BUILTIN_TASKS, OBS_MODES
+    from wpbench.policies.registry import available_policies
+
+    check_choice("policy", policy, available_policies())
+    check_choice("task", task, BUILTIN_TASKS)
+    check_choice("observation mode", obs, OBS_MODES)
+    _load("wpbench.bench.workers").run(episodes=episodes, policy=policy, task=task, obs=obs, json_path=json_path)
