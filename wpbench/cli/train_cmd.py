@@ -13,7 +13,13 @@ from wpbench.names import TRAINABLE_POLICIES as POLICY_NAMES
 
 def train(
     policy: str = typer.Option(None, help=f"Policy to train: {', '.join(POLICY_NAMES)}."),
-    data: Path = typer.Option(Path("data"), help="Data root with train/ and val/ (from `wpbench data generate`)."),
+    data: list[str] = typer.Option(
+        None, "--data", metavar="PATH[:WEIGHT]",
+        help="Data root with train/ and val/ (from `wpbench data generate`) [default: data]. Repeat to mix data "
+             "sets: --data data3:0.7 --data data-own:0.3 draws each training sample from data3/train with "
+             "probability 0.7 and from data-own/train with 0.3, whatever their sizes (no :WEIGHT = weight 1; "
+             "weights are normalised). Validation and model selection use the first set's val/ only. "
+             "config.json records the mix (data.mix)."),
     minutes: float = typer.Option(20.0, min=0.01, help="Training wall-time budget in minutes (summed over resumes)."),
     out: Path = typer.Option(None, help="Run folder to write (and resume from) [default: runs/train/<policy>]."),
     weights_root: Path = typer.Option(None, help="Folder of trained policies: WeightedPose starts from its gf/ and tp/ "
@@ -99,7 +105,7 @@ def train(
         overrides = parse_model_options(model_option or [])
         loss_weights = parse_loss_weights(loss_weight or [])
         config = TrainConfig(
-            policy=policy, data=data, out=out, weights_root=weights_root, minutes=minutes, steps=steps, max_steps=max_steps,
+            policy=policy, data=list(data) if data else [Path("data")], out=out, weights_root=weights_root, minutes=minutes, steps=steps, max_steps=max_steps,
             steps_per_epoch=steps_per_epoch, batch_size=batch_size, learning_rate=learning_rate, mixing_warmup=mixing_warmup,
             lr_schedule=lr_schedule,
             num_action_points=num_action_points, num_anchor_points=num_anchor_points, augment_yaw=augment, augment_mirror=mirror, augment_scale=scale,
@@ -127,9 +133,20 @@ def _promote(run_dir: Path, weights_root: Path | None) -> None:
         typer.echo(f"Error: {err}", err=True)
         raise typer.Exit(2)
     typer.echo(f"promoted {shipped['policy']} (model_hash {shipped['model_hash']}): {run_dir} -> {shipped['weights_dir']}")
+    typer.echo(f"  {_data_line(Path(shipped['weights_dir']))}")
     best = shipped["best"]
     if best is not None:
         typer.echo(f"best WeightedPose variant: {best['policy']} ({best['criterion']}: {best['candidates']})")
+
+
+def _data_line(weights_dir: Path) -> str:
+    """What the weights in ``weights_dir`` were trained on, from their config.json."""
+    import json
+
+    from wpbench.training.data_mix import describe_data
+    from wpbench.weights import CONFIG_FILE
+
+    return describe_data(json.loads((weights_dir / CONFIG_FILE).read_text()).get("data", {}))
 
 
 def parse_model_options(options: list[str]) -> dict:

@@ -12,6 +12,9 @@ is ``gt_transform``, short rows repeat it; K = 1 for data without symmetric
 objects or made before shards stored ``action_pose``). ``categories`` / ``object_ids``
 are kept as lists beside the tensors for per-category reporting; ``content_hash``
 identifies exactly the shards loaded (a resumed training run checks it).
+
+``ConcatenatedSamples`` holds several such datasets as one (a training that mixes data
+sets, ``wpbench.training.data_mix``).
 """
 
 from __future__ import annotations
@@ -114,3 +117,46 @@ def _equivalent_goal_table(data: dict[str, np.ndarray]) -> np.ndarray:
         if group is not None and len(group):
             table[i, 1:1 + len(group)] = equivalent_goals(T[i], data["action_pose"][i], group)
     return table
+
+
+class ConcatenatedSamples:
+    """Several ``CrossPoseDataset`` s as one, for a training that mixes data sets
+    (``wpbench.training.data_mix``): the same tensors (``action``, ``anchor``, ``gt_transform``,
+    ``gt_equivalents``, ``kind``), concatenated in order, and ``source`` (N,) int64, the set each
+    sample came from; ``sizes`` the sets' lengths. Goal tables of different widths are padded by
+    repeating each sample's own goal (row 0), which changes no nearest-goal choice.
+    Every set's clouds must hold the same point counts (ValueError otherwise).
+    """
+
+    def __init__(self, parts: list[CrossPoseDataset]) -> None:
+        if not parts:
+            raise ValueError("nothing to concatenate: give at least one data set")
+        shapes = {(tuple(p.action.shape[1:]), tuple(p.anchor.shape[1:])) for p in parts}
+        if len(shapes) > 1:
+            raise ValueError(f"the data sets store clouds of different sizes {sorted(shapes)}; "
+                             "generate them with the same --num-action-points and --num-anchor-points")
+        self.parts = parts
+        self.sizes = [len(p) for p in parts]
+        self.action = torch.cat([p.action for p in parts])
+        self.anchor = torch.cat([p.anchor for p in parts])
+        self.gt_transform = torch.cat([p.gt_transform for p in parts])
+        self.kind = torch.cat([p.kind for p in parts])
+        width = max(p.gt_equivalents.shape[1] for p in parts)
+        self.gt_equivalents = torch.cat([_pad_goals(p.gt_equivalents, width) for p in parts])
+        self.source = torch.cat([torch.full((len(p),), i, dtype=torch.int64) for i, p in enumerate(parts)])
+        self.categories = [c for p in parts for c in p.categories]
+        self.object_ids = [o for p in parts for o in p.object_ids]
+
+    def __len__(self) -> int:
+        return len(self.kind)
+
+    def count(self, kind: str) -> int:
+        return int((self.kind == KIND_CODE[kind]).sum())
+
+
+def _pad_goals(table: torch.Tensor, width: int) -> torch.Tensor:
+    """(N, K, 4, 4) -> (N, width, 4, 4), the extra columns repeating column 0."""
+    missing = width - table.shape[1]
+    if missing <= 0:
+        return table
+    return torch.cat([table, table[:, :1].expand(-1, missing, -1, -1)], dim=1)

@@ -21,6 +21,11 @@ def default_run_dir(policy: str) -> Path:
 class TrainConfig:
     """A training run of ``policy`` on ``data`` for at most ``minutes`` of wall time.
 
+    data: a data root (train/ and val/ from ``wpbench data generate``), or several to mix:
+        a list of paths, "PATH:WEIGHT" strings or ``DataSource`` s (``wpbench.training.data_mix``).
+        After construction ``data`` is the first set's path (whose val/ selects the model) and
+        ``data_sources`` every set with its weight.
+
     out: the run folder it writes [default: ``runs/train/<policy>``]; never the shipped weights
         unless asked for (``wpbench.weights.promote`` ships a finished run).
     weights_root: where the trained Goal Flow and TAX-Pose a WeightedPose variant starts from
@@ -54,7 +59,7 @@ class TrainConfig:
     """
 
     policy: str
-    data: Path = Path("data")
+    data: Path | str | list = Path("data")
     out: Path | None = None
     weights_root: Path | None = None
     minutes: float = 20.0
@@ -84,9 +89,13 @@ class TrainConfig:
     threads: int = 1
     model_overrides: dict = field(default_factory=dict)
     loss_weights: dict = field(default_factory=dict)
+    data_sources: tuple = field(default=(), init=False)
 
     def __post_init__(self) -> None:
-        self.data = Path(self.data)
+        from wpbench.training.data_mix import as_sources
+
+        self.data_sources = as_sources(self.data)
+        self.data = self.data_sources[0].path
         self.weights_root = Path(self.weights_root) if self.weights_root is not None else shipped_weights_root()
         self.out = Path(self.out) if self.out is not None else default_run_dir(self.policy)
         if self.minutes <= 0:
@@ -132,4 +141,12 @@ class TrainConfig:
         d = asdict(self)
         for key in ("data", "out", "weights_root"):
             d[key] = str(d[key])
+        if self.is_mix():
+            d["data_sources"] = [source.text() for source in self.data_sources]
+        else:
+            d.pop("data_sources")  # one data root: recorded as "data" alone
         return d
+
+    def is_mix(self) -> bool:
+        """More than one data set (one set, with or without a weight, trains as a single data root)."""
+        return len(self.data_sources) > 1

@@ -1,6 +1,7 @@
 """The trainer: ``train(TrainConfig) -> metrics``.
 
-Read top to bottom: load data -> build (or warm-start) the model -> resume from
+Read top to bottom: load data (one data root, or several mixed by weight:
+``wpbench.training.data_mix``) -> build (or warm-start) the model -> resume from
 ``checkpoint.pt`` if there is one -> epochs of ``steps_per_epoch`` optimiser
 steps, each followed by validation, a log row, a checkpoint and the plot ->
 stop at the time budget (or ``max_steps``) -> final validation -> ``model.pt``,
@@ -22,9 +23,10 @@ from wpbench.data.config import KINDS
 from wpbench.data.dataset import CrossPoseDataset
 from wpbench.models.loss_presets import compute_loss
 from wpbench.training import log as train_log
-from wpbench.training.batches import make_batch, prepare, shuffled_batches
+from wpbench.training.batches import make_batch, prepare
 from wpbench.training.checkpoint import load_checkpoint, save_checkpoint
 from wpbench.training.config import TrainConfig
+from wpbench.training.data_mix import load_mix, mix_hash, mix_record, training_batches
 from wpbench.training.evaluate import evaluate, mean_point_error
 from wpbench.training.specs import PolicySpec, get_spec
 from wpbench.training.warmup import in_warmup, set_phase
@@ -83,10 +85,17 @@ def build_policy_model(spec: PolicySpec, config: TrainConfig) -> tuple[torch.nn.
     return model, origin
 
 
-def _load_data(config: TrainConfig, spec: PolicySpec) -> tuple[CrossPoseDataset, CrossPoseDataset]:
+def _load_data(config: TrainConfig, spec: PolicySpec):
+    """(train samples, val set, data hashes, per-set descriptions or None for one data root).
+
+    A mix trains on every set's train/ and validates on the first set's val/."""
+    if config.is_mix():
+        train_set, described = load_mix(config.data_sources, spec.kinds)
+        val_set = CrossPoseDataset(config.data / "val", spec.kinds)
+        return train_set, val_set, {"train": mix_hash(described), "val": val_set.content_hash}, described
     train_set = CrossPoseDataset(config.data / "train", spec.kinds)
     val_set = CrossPoseDataset(config.data / "val", spec.kinds)
-    return train_set, val_set
+    return train_set, val_set, {"train": train_set.content_hash, "val": val_set.content_hash}, None
 
 
 def scheduled_lr(base: float, schedule: str, elapsed: float, budget: float) -> float:
@@ -126,8 +135,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
     torch.manual_seed(config.seed)
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
-    train_set, val_set = _load_data(config, spec)
-    data_hashes = {"train": train_set.content_hash, "val": val_set.content_hash}
+    train_set, val_set, data_hashes, mix = _load_data(config, spec)
     model, origin = build_policy_model(spec, config)
     lr = config.learning_rate if config.learning_rate is not None else spec.learning_rate
     warmup = config.mixing_warmup if config.mixing_warmup is not None else spec.mixing_warmup
@@ -135,6 +143,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
     generator = torch.Generator().manual_seed(config.seed)
 
     epoch, step, elapsed, rows = 0, 0, 0.0, []
+    drawn = [0] * len(config.data_sources)  # training samples drawn from each data set
     state = None if restart else load_checkpoint(out)
     if state is not None:
         if state["policy"] != config.policy or state["data"] != data_hashes:
@@ -146,13 +155,17 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
         optimizer.load_state_dict(state["optimizer"])
         generator.set_state(state["generator"])
         epoch, step, elapsed, rows = state["epoch"], state["step"], state["elapsed_s"], state["rows"]
+        drawn = list(state.get("drawn_by_data", drawn))
         echo(f"resuming {config.policy} from epoch {epoch}, step {step}, {elapsed / 60:.1f} min trained")
     budget = config.minutes * 60.0
-    batches = shuffled_batches(len(train_set), config.batch_size, generator)
+    batches = training_batches(train_set, config.data_sources, config.batch_size, generator)
     budget_text = f"{config.steps} steps (at most {config.minutes} min)" if config.steps else f"{config.minutes} min"
     echo(f"{config.policy}: {len(train_set)} train / {len(val_set)} val samples ({', '.join(spec.kinds)}), "
          f"{sum(p.numel() for p in model.parameters())} parameters, lr {lr}, budget {budget_text}"
          + (f", the first {warmup:.0%} training the mixing head alone" if warmup > 0 else ""))
+    if mix is not None:
+        echo("data mix: " + "; ".join(f"{d['path']} {d['weight']:.0%} of samples ({d['samples']} samples)" for d in mix)
+             + f"; validation on {config.data}/val")
 
     # The budget is wall time: validation, checkpoints and the log count too, so that "trained for N
     # minutes" is what a user waits.
@@ -194,7 +207,10 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
         while steps_done < config.steps_per_epoch and not out_of_steps():
             for group in optimizer.param_groups:
                 group["lr"] = phase_lr(spec, lr, config.lr_schedule, *position(), warmup)
-            batch = prepare(make_batch(train_set, next(batches)), config.num_action_points,
+            indices, sets = next(batches)
+            for which in sets.tolist():
+                drawn[which] += 1
+            batch = prepare(make_batch(train_set, indices), config.num_action_points,
                             config.num_anchor_points, config.augment_yaw, generator,
                             config.augment_mirror, config.augment_scale, config.augment_stretch)
             output = model(batch["action"], batch["anchor"])
@@ -225,7 +241,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
         rows.append(row)
         save_checkpoint(out, {"policy": config.policy, "data": data_hashes, "model": model.state_dict(),
                               "optimizer": optimizer.state_dict(), "generator": generator.get_state(),
-                              "epoch": epoch, "step": step, "elapsed_s": elapsed, "rows": rows,
+                              "epoch": epoch, "step": step, "elapsed_s": elapsed, "rows": rows, "drawn_by_data": drawn,
                               "train_config": config.to_json()})
         train_log.write_log(out, rows)
         if epoch % PLOT_EVERY_EPOCHS == 0:
@@ -255,6 +271,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
         "steps": step,
         "epochs": epoch,
         "samples_seen": step * config.batch_size,
+        **({"samples_drawn_by_data": {d["path"]: n for d, n in zip(mix, drawn)}} if mix is not None else {}),
         "peak_rss_mib": round(peak_rss_mib(), 1),
     }
     description = {
@@ -266,7 +283,8 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
         "kinds": list(spec.kinds),
         "num_action_points": config.num_action_points,
         "num_anchor_points": config.num_anchor_points,
-        "data": {"path": str(config.data), **{f"{k}_manifest_hash": v for k, v in data_hashes.items()}},
+        "data": {"path": str(config.data), **{f"{k}_manifest_hash": v for k, v in data_hashes.items()},
+                 **({"val_from": str(config.data), "mix": mix_record(mix, drawn)} if mix is not None else {})},
         "init": origin,
         "train_config": config.to_json(),
     }
