@@ -94,3 +94,82 @@ def test_two_nodes_share_the_episodes_and_the_weights_travel_through_the_object_
     assert len(nodes(parallel)) == 2
     digest, _ = pack_folder(shipped_weights_root())
     assert (Path(tempfile.gettempdir()) / "wpbench-ray" / digest / "best.json").is_file()
+
+
+EXACT_DECOMPOSER = '''
+from wpbench.assets.decompose import convex_pieces_from_vertices
+
+
+def exact(mesh, config):
+    return convex_pieces_from_vertices([part.vertices for part in mesh.split(only_watertight=False)])
+'''
+
+
+def collision_entries(cache: Path) -> dict[str, bytes]:
+    """{<object>/pieces/<entry>/timing.json: its bytes} of a collision cache."""
+    return {str(p.relative_to(cache)): p.read_bytes() for p in sorted((cache / "partnet").glob("*/pieces/*/timing.json"))}
+
+
+@pytest.mark.slow
+def test_a_folder_is_decomposed_once_and_a_node_with_its_own_cache_does_not_decompose_again(tmp_path, monkeypatch):
+    """Two nodes with a collision cache each (as on two machines): the driver's entries, made
+    by a fast exact decomposer, reach the second node as they are; had that node decomposed
+    again it would have run CoACD, whose entries have other pieces and times."""
+    from ray.cluster_utils import Cluster
+
+    from wpbench.assets.prepare import prepare_folder
+    from wpbench.assets.procedural import generate_object
+    from wpbench.evaluation.ray_workers import RayPool
+
+    plug = tmp_path / "plug"
+    plug.mkdir()
+    (plug / "exact_decomposer.py").write_text(EXACT_DECOMPOSER)
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [str(plug), os.environ.get("PYTHONPATH")])))
+    objects = tmp_path / "objects"
+    generate_object("oven", 2, objects)
+    driver_cache, node_cache = tmp_path / "driver-cache", tmp_path / "node-cache"
+    monkeypatch.setenv("WPBENCH_CACHE", str(driver_cache))
+    prepared = prepare_folder(objects, workers=2, progress=False, decomposer="exact_decomposer:exact")
+    assert [p.error for p in prepared] == [None]
+    made_on_driver = collision_entries(driver_cache)
+    assert made_on_driver
+
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "node_ip_address": "127.0.0.1",
+                                                            "include_dashboard": False})
+    monkeypatch.setenv("WPBENCH_CACHE", str(node_cache))  # the second node's processes inherit it
+    cluster.add_node(num_cpus=1, node_ip_address="127.0.0.1")
+    monkeypatch.setenv("WPBENCH_CACHE", str(driver_cache))
+    try:
+        serial, parallel = run_serial_then(RayPool(address=cluster.address), tmp_path, policy="gt",
+                                           task="open-door", obs="mesh", episodes=4, assets=str(objects))
+    finally:
+        ray.shutdown()
+        cluster.shutdown()
+    assert content(parallel) == content(serial)
+    assert {r["object_id"] for r in content(parallel)} == {"oven-0002"}
+    assert len(nodes(parallel)) == 2
+    assert collision_entries(node_cache) == made_on_driver
+    assert collision_entries(driver_cache) == made_on_driver
+
+
+def test_collision_cache_entries_travel_to_a_node_cache_without_overwriting_it(tmp_path, monkeypatch):
+    from wpbench.evaluation.ray_workers import install_collision_cache, pack_files, unpack_folder
+
+    source = tmp_path / "driver"
+    for name, text in (("link_0-aaa", "0"), ("link_1-bbb", "1")):
+        entry = source / "oven-1" / "pieces" / name
+        entry.mkdir(parents=True)
+        (entry / "piece_000.obj").write_text(f"v {text} 0 0\n")
+        (entry / "timing.json").write_text(json.dumps({"seconds": float(text)}))
+    files = [(p.relative_to(source).as_posix(), p) for p in source.rglob("*") if p.is_file()]
+    digest, data = pack_files(files)
+    monkeypatch.setenv("WPBENCH_CACHE", str(tmp_path / "node"))
+    kept = tmp_path / "node" / "partnet" / "oven-1" / "pieces" / "link_1-bbb"
+    kept.mkdir(parents=True)
+    (kept / "timing.json").write_text("already there")
+    copied = install_collision_cache(unpack_folder(digest, data, tmp_path / "unpacked"))
+    assert [p.name for p in copied] == ["link_0-aaa"]
+    node_entry = tmp_path / "node" / "partnet" / "oven-1" / "pieces" / "link_0-aaa"
+    assert (node_entry / "piece_000.obj").read_text() == "v 0 0 0\n"
+    assert (kept / "timing.json").read_text() == "already there"
+    assert not [p for p in node_entry.parent.iterdir() if p.name.startswith(".")]  # no staging left

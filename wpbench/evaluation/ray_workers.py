@@ -5,10 +5,13 @@ of processes: one actor per CPU of the cluster (one CPU each), each building a r
 env and policy once and running one episode at a time; the driver writes every record,
 so the nodes need no shared file system. What an episode needs beyond the installed
 package travels with the tasks through Ray's object store: the trained weights of a
-weighted policy and a PartNet-Mobility ``--assets`` folder are put there once per run
-as bytes and unpacked once per node into a folder named by their content hash. (The
-built-in furniture is generated on each node from the package: same code, same seed,
-same furniture.)
+weighted policy and a PartNet-Mobility ``--assets`` folder are put there once per
+sweep as bytes and unpacked once per node into a folder named by their content hash.
+A folder's convex decomposition is made once, on the driver (what its collision cache
+lacks, all links at once on the driver's cores, ``wpbench.assets.prepare``), and its
+cache entries travel the same way: each node copies them into its own collision cache
+before its first episode, so no node decomposes again. (The built-in furniture is
+generated on each node from the package: same code, same seed, same furniture.)
 
 An actor that dies takes its episode with it: that episode goes to a new actor once,
 and is recorded as a failure with the reason if it dies again. Each record's
@@ -21,15 +24,17 @@ import dataclasses
 import hashlib
 import io
 import os
+import sys
 import tarfile
 import tempfile
 from collections import deque
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any, Iterable, Iterator, Sequence
 
 from wpbench.evaluation.local_workers import POLL_S, RETRIES, WorkerError, set_thread_count
 
-__all__ = ["RayPool", "pack_folder", "unpack_folder", "ray_available"]
+__all__ = ["RayPool", "pack_folder", "pack_files", "unpack_folder", "collision_cache_files",
+           "install_collision_cache", "ray_available"]
 
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
 SINGLE_MACHINE_VARIABLE = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
@@ -42,22 +47,31 @@ def ray_available() -> bool:
     return importlib.util.find_spec("ray") is not None
 
 
-def pack_folder(folder: str | os.PathLike[str]) -> tuple[str, bytes]:
-    """``(sha256 of the archive, tar archive of folder)``, hidden entries left out, entries
-    in sorted order with fixed times and owners, so equal contents give equal archives."""
-    root = Path(folder)
+def pack_files(files: Iterable[tuple[str, Path]]) -> tuple[str, bytes]:
+    """``(sha256 of the archive, tar archive)`` of ``(name in the archive, file)`` pairs, in
+    sorted order with fixed times and owners, so equal contents give equal archives."""
     buffer = io.BytesIO()
     with tarfile.open(fileobj=buffer, mode="w") as archive:
-        for path in sorted(root.rglob("*")):
-            relative = path.relative_to(root)
-            if any(part.startswith(".") for part in relative.parts) or not path.is_file():
-                continue
-            info = archive.gettarinfo(str(path), arcname=relative.as_posix())
+        for name, path in sorted(files):
+            info = archive.gettarinfo(str(path), arcname=name)
             info.mtime, info.uid, info.gid, info.uname, info.gname = 0, 0, 0, "", ""
             with open(path, "rb") as handle:
                 archive.addfile(info, handle)
     data = buffer.getvalue()
     return hashlib.sha256(data).hexdigest(), data
+
+
+def pack_folder(folder: str | os.PathLike[str], prefix: str = "") -> tuple[str, bytes]:
+    """:func:`pack_files` of every file under ``folder`` (hidden entries left out), named by
+    their path in it, under ``prefix/`` when given."""
+    root = Path(folder)
+    files = []
+    for path in root.rglob("*"):
+        relative = path.relative_to(root)
+        if any(part.startswith(".") for part in relative.parts) or not path.is_file():
+            continue
+        files.append(((Path(prefix) / relative).as_posix() if prefix else relative.as_posix(), path))
+    return pack_files(files)
 
 
 def unpack_folder(digest: str, data: bytes, root: Path | None = None) -> Path:
@@ -80,18 +94,77 @@ def unpack_folder(digest: str, data: bytes, root: Path | None = None) -> Path:
     return target
 
 
-def _shipped_folders(cfg) -> dict[str, Path]:
-    """What of run ``cfg`` lives outside the package: its weights root and asset folder."""
+def collision_cache_files(folder: Path, progress: bool = False) -> list[tuple[str, Path]]:
+    """The collision cache entries of every usable object under ``folder``, as
+    ``("<object id>/pieces/<entry>/<file>", path)`` pairs; what this machine's cache lacks
+    is decomposed first (:func:`wpbench.assets.prepare.prepare_folder`)."""
+    from wpbench.assets.collision import plan_collision
+    from wpbench.assets.partnet import default_cache_dir
+    from wpbench.assets.prepare import prepare_folder
+
+    files = []
+    for prepared in prepare_folder(folder, progress=progress):
+        if prepared.derived is None:
+            continue  # the loader refuses it on every node alike
+        object_id = prepared.folder.name
+        plan = plan_collision(prepared.folder, default_cache_dir(object_id))
+        plan.cleanup()
+        for entry in plan.entries.values():
+            files += [(f"{object_id}/pieces/{entry.name}/{path.relative_to(entry).as_posix()}", path)
+                      for path in entry.rglob("*") if path.is_file()]
+    return files
+
+
+def install_collision_cache(unpacked: Path) -> list[Path]:
+    """Copy the entries of an unpacked :func:`collision_cache_files` archive into this node's
+    collision cache (``wpbench.assets.partnet.default_cache_dir``), each atomically; entries
+    already there are kept. The entries copied."""
+    import shutil
+
+    from wpbench.assets.decompose import entry_is_complete
+    from wpbench.assets.partnet import default_cache_dir
+
+    copied = []
+    for entry in sorted(Path(unpacked).glob("*/pieces/*")):
+        target = default_cache_dir(entry.parent.parent.name) / "pieces" / entry.name
+        if entry_is_complete(target):
+            continue
+        target.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{entry.name}-"))
+        shutil.copytree(entry, staging, dirs_exist_ok=True)
+        try:
+            os.rename(staging, target)
+            copied.append(target)
+        except OSError:  # another actor on this node was first
+            shutil.rmtree(staging, ignore_errors=True)
+    return copied
+
+
+def _shipped(cfg, packed: dict, put, progress: bool = False) -> list[tuple[str, str, Any, str]]:
+    """What of run ``cfg`` lives outside the package, as ``(what, digest, object reference,
+    folder name in the archive)``: its weights root, its asset folder and that folder's
+    collision cache. ``packed`` holds what earlier runs already put in the object store."""
     from wpbench import names
 
-    folders = {}
+    items = []
     if cfg.policy in names.WEIGHTED_POLICIES:
         from wpbench.weights import weights_root_or_shipped
 
-        folders["weights_root"] = weights_root_or_shipped(cfg.policy_kwargs.get("weights_root"))
+        items.append(("weights_root", Path(weights_root_or_shipped(cfg.policy_kwargs.get("weights_root"))), ""))
     if cfg.assets != "procedural":
-        folders["assets"] = Path(cfg.assets)
-    return folders
+        folder = Path(cfg.assets).expanduser().resolve()
+        items += [("assets", folder, folder.name), ("collision_cache", folder, "")]
+    shipped = []
+    for what, folder, name in items:
+        key = (what, str(folder))
+        if key not in packed:
+            if what == "collision_cache":
+                digest, data = pack_files(collision_cache_files(folder, progress=progress))
+            else:
+                digest, data = pack_folder(folder, prefix=name)
+            packed[key] = (digest, put(data))
+        shipped.append((what, *packed[key], name))
+    return shipped
 
 
 class EpisodeActor:
@@ -111,8 +184,11 @@ class EpisodeActor:
                 self.session.close()
             self.session, self.current = None, None
             local = {}
-            for name, digest, reference in shipped:
-                local[name] = str(unpack_folder(digest, ray.get(reference)))
+            for what, digest, reference, name in shipped:
+                unpacked = unpack_folder(digest, ray.get(reference))
+                if what == "collision_cache":
+                    install_collision_cache(unpacked)
+                local[what] = str(unpacked / name)
             if "weights_root" in local:
                 cfg = dataclasses.replace(cfg, policy_kwargs={**cfg.policy_kwargs, "weights_root": local["weights_root"]})
             if "assets" in local:
@@ -179,12 +255,10 @@ class RayPool:
             return
         self._connect()
         shipped: dict[int, list] = {}
+        packed: dict = {}
         for job in jobs:
             if job.run not in shipped:
-                shipped[job.run] = []
-                for name, folder in _shipped_folders(job.cfg).items():
-                    digest, data = pack_folder(folder)
-                    shipped[job.run].append((name, digest, ray.put(data)))
+                shipped[job.run] = _shipped(job.cfg, packed, ray.put, progress=sys.stderr.isatty())
         capacity = int(ray.cluster_resources().get("CPU", 1))
         count = min(self.workers or capacity, capacity, len(jobs))
         idle = deque(self._new_actor() for _ in range(count))
