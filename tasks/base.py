@@ -22,9 +22,11 @@ executor's report).
 Ground truth: :meth:`CrossPoseEnv.ground_truth`, the one channel through which the true
 cross-pose and kind of the current stage leave the env (only privileged policies get it).
 ``reset(options=...)`` keys: ``"reconfigure"`` (ManiSkill's: load a new furniture
-instance), ``"restart_rng"`` (draw the furniture from the episode seed alone, as on a
-fresh env), ``"start_fraction"`` (articulated stages: start the joint at this fraction of
-the way from closed to open instead of the task's own draw).
+instance), ``"restart_rng"`` (draw the furniture from the episode seed alone even after
+an interrupted reset: a draw of its own, not the one ``reset(seed=s)`` gives, which on a
+fresh or a used env alike is already a function of the seed), ``"start_fraction"``
+(articulated stages: start the joint at this fraction of the way from closed to open
+instead of the task's own draw).
 
 Executor (``executor=``, one of ``wpbench.names.EXECUTORS``; docs/executors.md):
 ``"ideal"`` (default) drives the joint to the best-matching value / teleports the object;
@@ -175,8 +177,9 @@ class CrossPoseEnv(BaseEnv):
         if unknown:
             raise ValueError(f"unknown reset option(s) {sorted(unknown)}; valid: {sorted(RESET_OPTIONS)}")
         if (options or {}).get("restart_rng"):
-            # The furniture is drawn from an rng counter that otherwise carries over from
-            # earlier episodes; restarting it makes the scene a function of the seed only.
+            # The furniture is drawn from an rng counter that every completed reset leaves at
+            # the same value (the construction's reset too); restarting it makes the scene a
+            # function of the seed even after an interrupted reset, with its own draw.
             self._rng_counter = -1
         if seed is not None:
             first = seed[0] if isinstance(seed, (list, tuple)) else seed
