@@ -18,6 +18,10 @@ def paper_table(
     mirror_views: bool = typer.Option(None, help="Answer every second subset in the mirrored scene "
                                                  "[default: as the learned policies answer]."),
     out: Path = typer.Option(Path("results/paper-table.md"), help="Markdown file to write."),
+    workers: int = typer.Option(None, min=1, help="Worker processes for the missing runs, all run as one sweep "
+                                                  "[default: the number of cores]."),
+    ray: str = typer.Option(None, "--ray", metavar="ADDRESS", help="Run the missing runs on a Ray cluster instead: "
+                                                                   "'local', 'auto' or HOST:PORT."),
 ) -> None:
     """Pose errors (train/val x free-floating/articulated) and simulated success of every learned policy."""
     from wpbench.cli.choices import check_choice
@@ -29,8 +33,12 @@ def paper_table(
     if not (data / "train").is_dir() or not (data / "val").is_dir():
         raise typer.BadParameter(f"{data} lacks train/ and val/; make them with `wpbench data generate --out {data}`")
     ensemble = {key: value for key, value in (("subsets", subsets), ("mirror_views", mirror_views)) if value is not None}
+    from wpbench.cli.run_cmd import ray_address
+    from wpbench.evaluation.local_workers import available_cores
+
     cfg = PaperTableConfig(data=data, samples_per_kind=samples, episodes=episodes, obs=obs, run_missing=run_missing,
-                           results=out.parent, **ensemble)
+                           results=out.parent, workers=workers if ray is not None else (workers or available_cores()),
+                           use_ray=ray is not None, ray_address=ray_address(ray), **ensemble)
     path = make_paper_table(cfg, out)
     typer.echo(path.read_text())
     typer.echo(f"written: {path}")

@@ -9,7 +9,9 @@ Four tables, one command (``wpbench paper-table``):
 2. Val pose errors by furniture category, per kind.
 3. Simulated success rate (95% Wilson interval) of each policy on every task,
    val split, built-in furniture: read from ``results/runs/<policy>__<task>__val__procedural__<obs>``
-   and, with ``run_missing``, run there first.
+   and, with ``run_missing``, run there first: every missing or short run in one sweep
+   (``wpbench.evaluation.sweep``), all their episodes on one pool (``workers`` local
+   processes or a Ray cluster), each run resumable, the leaderboard rebuilt after.
 4. The same on the real PartNet-Mobility objects, where those runs exist
    (``results/runs/<policy>__<task>__val__partnet-mobility__<obs>``, made by
    ``scripts/reference_runs.sh``): how far policies trained on the built-in
@@ -44,6 +46,9 @@ class PaperTableConfig:
     policies: tuple[str, ...] = POLICIES
     subsets: int = DEFAULT_SUBSETS  # random subsets per sample, fused, as the learned policies answer
     mirror_views: bool = DEFAULT_MIRROR_VIEWS  # every second subset answered in the mirrored scene, as they do
+    workers: int | None = 1  # local worker processes for the missing runs (None: one per core)
+    use_ray: bool = False  # run the missing runs on a Ray cluster instead
+    ray_address: str | None = None  # that cluster (None: a local one)
 
 
 def _policies_for(policy: str, cfg: PaperTableConfig) -> dict[str, object]:
@@ -114,17 +119,33 @@ def real_success(cfg: PaperTableConfig, policy: str, task: str) -> dict | None:
 
 
 def success(cfg: PaperTableConfig, policy: str, task: str) -> dict | None:
-    """The run's summary (running it first when missing and allowed), or None."""
-    from wpbench.evaluation.runner import RunConfig, run_benchmark
+    """The run's summary as it is on disk, or None when it was never run."""
+    return _read_summary(run_dir(cfg, policy, task))
 
-    directory = run_dir(cfg, policy, task)
-    summary = _read_summary(directory)
-    if summary is not None and (summary.get("episodes", 0) >= cfg.episodes or not cfg.run_missing):
-        return summary
-    if not cfg.run_missing:
-        return None
-    return run_benchmark(RunConfig(policy=policy, task=task, split="val", episodes=cfg.episodes, obs=cfg.obs,
-                                   out=directory, resume=True))
+
+def missing_runs(cfg: PaperTableConfig, policies: tuple[str, ...] | list[str]):
+    """RunConfigs (resumable, in ``run_dir``) of the built-in-furniture runs of ``policies``
+    that are missing or hold fewer than ``cfg.episodes`` episodes."""
+    from wpbench.evaluation.sweep import sweep_configs
+
+    configs = []
+    for policy in policies:
+        for task in TASKS:
+            summary = success(cfg, policy, task)
+            if summary is None or summary.get("episodes", 0) < cfg.episodes:
+                (config,) = sweep_configs([policy], [task], cfg.episodes, cfg.results, obs=cfg.obs)
+                configs.append(config)
+    return configs
+
+
+def run_missing(cfg: PaperTableConfig, policies: tuple[str, ...] | list[str]) -> list[dict]:
+    """Run every missing or short run of ``policies`` in one sweep; their summaries."""
+    configs = missing_runs(cfg, policies)
+    if not configs:
+        return []
+    from wpbench.evaluation.sweep import run_sweep
+
+    return run_sweep(configs, cfg.results, workers=cfg.workers, use_ray=cfg.use_ray, ray_address=cfg.ray_address)
 
 
 def _fmt(value: float, scale: float = 1.0, digits: int = 1) -> str:
@@ -198,7 +219,9 @@ def make_paper_table(cfg: PaperTableConfig, out: Path | None = None) -> Path:
             by_category[policy] = category_errors(cfg, policy)
         except (FileNotFoundError, ValueError) as err:
             print(f"{policy}: no pose errors ({err})")
-            continue
+    if cfg.run_missing:
+        run_missing(cfg, [policy for policy in cfg.policies if policy in errors])
+    for policy in errors:
         for task in TASKS:
             summary = success(cfg, policy, task)
             if summary is not None:
