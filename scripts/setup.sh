@@ -92,4 +92,6 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   pip install -q -e ".[dev]"
   touch "$stamp"
 fi
+# numpy 1 for the panda executor's mplib planner process (wpbench/sim/arm_planner_env.py).
+"$VENV/bin/python" -m wpbench.sim.arm_planner_env >/dev/null
 log "ready: $VENV/bin/wpbench"

@@ -32,7 +32,7 @@ RUN_SPLITS = (*SPLITS, "all")
 OBS_MODES = ("camera", "mesh")
 
 # How a predicted cross-pose is carried out in the simulator.
-EXECUTORS = ("ideal", "gripper")
+EXECUTORS = ("ideal", "gripper", "panda")
 
 # Policy groups. The registry (wpbench.policies.registry) maps each name to its class.
 TRAINABLE_POLICIES = ("gf", "tp", "wp-og", "wp-postsvd", "wp-postsvd-t")

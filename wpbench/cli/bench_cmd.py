@@ -78,6 +78,7 @@ def episodes(
     task: Optional[list[str]] = typer.Option(None, help="Task to time; repeat for several (default: all)."),
     obs: Optional[list[str]] = typer.Option(None, help="Observation mode; repeat for several (default: all)."),
     policy: Optional[str] = typer.Option(None, help="Policy to time, if the benchmark supports choosing one."),
+    executor: Optional[str] = typer.Option(None, help="Executor (ideal, gripper, panda); default: ideal."),
     json_path: Optional[Path] = typer.Option(None, "--json", help=_JSON_HELP),
 ) -> None:
     """Simulation throughput: episodes per minute and peak memory per task."""
@@ -88,6 +89,7 @@ def episodes(
         tasks=tuple(task) if task else None,
         obs_modes=tuple(obs) if obs else None,
         policy=policy,
+        executor=executor,
         json_path=json_path,
     )
 

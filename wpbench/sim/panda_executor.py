@@ -1,0 +1,606 @@
+"""The ``panda`` executor: a Panda arm (wpbench.sim.panda_arm) carries out the predicted cross-pose.
+
+It sees what a policy sees (the stage's observed clouds) and the predicted cross-pose,
+nothing else, and makes the same grasp and TCP path as the ``gripper`` executor
+(wpbench.sim.grasp_choice, wpbench.sim.screw_path, wpbench.sim.side_entry): an arm now
+has to reach them.
+
+1. The TCP path is written as a script: free-space moves to a pre-grasp pose, and
+   Cartesian pieces (approach, the screw about the predicted hinge or the carry, retreat)
+   between grasps and releases.
+2. Planning (mplib, wpbench.sim.arm_planner), before anything moves: for each base
+   placement (wpbench.sim.arm_placement) the arm's joint path is solved, pose by pose
+   along every Cartesian piece (IK seeded with the last pose; no jump, within the joint
+   limits, the arm's links clear of the observed anchor cloud), and every free-space move
+   is a straight joint-space line or an RRTConnect path clear of the observed clouds. The
+   first placement that works is used. None reaches the path: ``unreachable``; the poses
+   are reached but no collision-free move or chain exists: ``planning_failed``.
+3. Execution: the base is placed, the arm starts at its rest pose, and its joint targets
+   (pd_joint_pos, velocity feed-forward) follow the planned joint path at the gripper's
+   speeds (minimum-jerk timing); grasps, the joint's release and the settle are the
+   gripper's. Physics decides: a wrong hinge pulls against the joint and the arm falls
+   behind (``stalled_against_hinge``) or the suction gives (``slipped``); furniture in the
+   way stops it (``collision``).
+4. After the stage the arm is parked far away, as the gripper is.
+
+Nothing raises: a failure is a result with a reason of wpbench.sim.failure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from wpbench.sim.arm_placement import base_candidates
+from wpbench.sim.arm_planner import ARM_LINKS, HAND_LINKS, ArmPlanner, PlannerError
+from wpbench.sim.executor import ExecutionResult, blown_up, simulate_until_still
+from wpbench.sim.failure import (BLOW_UP, COLLISION, GRASP_MISSED, PLANNING_FAILED, SLIPPED, STALLED_AGAINST_HINGE,
+                                 UNREACHABLE)
+from wpbench.sim.grasp_choice import Grasp, articulated_grasp, carry_height, suction_point, top_grasp, top_suction_point
+from wpbench.sim.gripper import FINGER_OPEN
+from wpbench.sim.gripper_executor import (BLOCKED_OPENING, CARRY_CLEARANCE, CLOSE_SECONDS, HELD_OPENING, HOLD_SECONDS,
+                                          LIFT_HEIGHT, PREGRASP_DISTANCE, REGRASP_LIFT, RELEASE_SECONDS,
+                                          RETREAT_DISTANCE, STALL_ANGLE, STALL_DISTANCE, SUCTION_PRESS, SUCTION_SLIP,
+                                          _below_floor, _pose_distance, _segment_seconds, _smooth)
+from wpbench.sim.panda_arm import HOME_QPOS, PandaArm
+from wpbench.sim.screw_path import interpolate, path_length, screw_of
+from wpbench.sim.side_entry import is_roofed, plan_side_entry, segment_poses
+
+MAX_JOINT_SPEED = 1.0        # rad/s, the fastest joint of a free-space move (mean speed x 1.875 at the peak)
+MIN_MOVE_SECONDS = 0.3
+MOVE_CLEARANCE = 0.015       # m, free-space moves keep the arm and hand this far from the observed clouds
+ARM_CLEARANCE = 0.01         # m, along Cartesian pieces the arm's links keep this far from the observed anchor
+JOINT_STALL = 0.25           # rad, a joint this far behind its target on a free-space move has been stopped
+SCREW_STEP = 0.01            # m between IK samples along a screw path ...
+SCREW_STEP_ANGLE = 0.05      # ... and rad
+RRT_SECONDS = 1.0
+IK_SEEDS = 8                 # random IK seeds (a fixed generator) besides the rest pose
+MAX_RRT_CANDIDATES = 3       # placements for which RRT is tried when no straight move is clear
+# Turns of the TCP about its approach tried for the same grasp: the hand is symmetric under
+# half a turn (fingers, palm box); a suction cup from above also under a quarter turn.
+FLOOR_EXTENT = 1.2           # m, floor points this far around the base ...
+FLOOR_SPACING = 0.05         # m ...
+FLOOR_FREE_RADIUS = 0.25     # m ... except under the base
+MAX_CHAIN_STARTS = 3         # IK solutions of the pre-grasp pose from which the Cartesian chain is tried
+SYMMETRIC_ROLLS = (0.0, np.pi)
+TOP_SUCTION_ROLLS = (0.0, np.pi, np.pi / 2, -np.pi / 2)
+
+
+@dataclass
+class ArmScene:
+    """What the executor drives: the arm, its planner, one physics step, and the settle test of the action object."""
+
+    arm: PandaArm
+    planner: ArmPlanner
+    ms_scene: object
+    grasp_mode: str
+    step: Callable[[], None]
+    timestep: float
+    velocities: Callable[[], list[np.ndarray]]
+    is_still: Callable[[], bool]
+    held_touches_furniture: Callable[[], bool] | None = None
+
+
+# ---------------------------------------------------------------------------- the script
+@dataclass
+class Move:
+    """A free-space move to the TCP pose ``tcp`` (4, 4), clear of ``obstacles`` (N, 3)."""
+
+    tcp: np.ndarray
+    obstacles: np.ndarray
+
+
+@dataclass
+class Path:
+    """A Cartesian piece: TCP poses ``poses(u)``, u in [0, 1], over ``seconds``; ``sampled``
+    (K, 4, 4) are the poses at u = linspace(0, 1, K), where the planner solves IK."""
+
+    poses: Callable[[float], np.ndarray]
+    seconds: float
+    sampled: np.ndarray
+    check_stall: bool = True
+
+    @property
+    def samples(self) -> int:
+        return len(self.sampled)
+
+
+@dataclass
+class GraspStep:
+    grasp: Grasp
+
+
+@dataclass
+class ReleaseStep:
+    pass
+
+
+@dataclass
+class FreeJointStep:
+    pass
+
+
+def _line(a: np.ndarray, b: np.ndarray, check_stall: bool = True) -> Path:
+    from scipy.spatial.transform import Rotation, Slerp
+
+    sampled = segment_poses(a, b)
+    if len(sampled) < 2:
+        sampled = np.stack([a, b])
+    slerp = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([a[:3, :3], b[:3, :3]])))
+
+    def pose(u: float) -> np.ndarray:
+        T = np.eye(4)
+        T[:3, :3] = slerp(u).as_matrix()
+        T[:3, 3] = (1 - u) * a[:3, 3] + u * b[:3, 3]
+        return T
+
+    return Path(pose, _segment_seconds(a, b), sampled, check_stall)
+
+
+def _screw(cross_pose: np.ndarray, grip: np.ndarray) -> Path:
+    length = path_length(cross_pose, grip[:3, 3])
+    angle = screw_of(cross_pose).angle
+    samples = max(2, int(np.ceil(max(length / SCREW_STEP, angle / SCREW_STEP_ANGLE))) + 1)
+    seconds = _segment_seconds(np.eye(4), cross_pose, length)
+    sampled = interpolate(cross_pose, np.linspace(0.0, 1.0, samples)) @ grip
+    return Path(lambda u: interpolate(cross_pose, u) @ grip, seconds, sampled)
+
+
+def _approach(grasp: Grasp, suction: bool, obstacles: np.ndarray) -> list:
+    """Move to the pre-grasp pose, come in along the approach, grasp."""
+    pre = grasp.tcp.copy()
+    pre[:3, 3] -= PREGRASP_DISTANCE * grasp.approach
+    contact = grasp.tcp.copy()
+    if suction:
+        contact[:3, 3] += SUCTION_PRESS * grasp.approach
+    return [Move(pre, obstacles), _line(pre, contact, check_stall=False), GraspStep(grasp)]
+
+
+def _retreat(at: np.ndarray, approach: np.ndarray, retreat_to: np.ndarray | None = None) -> list:
+    back = at.copy()
+    if retreat_to is None:
+        back[:3, 3] -= RETREAT_DISTANCE * approach
+    else:
+        back[:3, 3] = retreat_to[:3, 3]
+    return [ReleaseStep(), _line(at, back, check_stall=False)]
+
+
+# ---------------------------------------------------------------------------- planning
+@dataclass
+class Segment:
+    """A planned motion: joint samples ``q`` (K, 7) at u = linspace(0, 1, K) over ``seconds``;
+    ``poses`` (Cartesian pieces) gives the TCP target at u for the stall check."""
+
+    q: np.ndarray
+    seconds: float
+    poses: Callable[[float], np.ndarray] | None = None
+    check_stall: bool = True
+
+
+@dataclass
+class Plan:
+    base: np.ndarray
+    steps: list = field(default_factory=list)     # Segment | GraspStep | ReleaseStep | FreeJointStep
+    script_index: int = 0
+
+
+class _NoPlan(Exception):
+    def __init__(self, reason: str, detail: str):
+        super().__init__(detail)
+        self.reason, self.detail = reason, detail
+
+
+def _ik_seeds() -> np.ndarray:
+    rng = np.random.default_rng(0)
+    lo = np.array([-2.8, -1.7, -2.8, -3.0, -2.8, 0.0, -2.8])
+    hi = np.array([2.8, 1.7, 2.8, -0.1, 2.8, 3.7, 2.8])
+    return np.vstack([HOME_QPOS, rng.uniform(lo, hi, size=(IK_SEEDS, 7))])
+
+
+def floor_points(base: np.ndarray) -> np.ndarray:
+    """The floor as obstacle points (FLOOR_SPACING apart, FLOOR_EXTENT around the base), except
+    under the base itself, where the robot stands on it."""
+    g = np.arange(-FLOOR_EXTENT, FLOOR_EXTENT + 1e-9, FLOOR_SPACING)
+    xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    xy = xy[np.linalg.norm(xy, axis=1) > FLOOR_FREE_RADIUS] + base[:2, 3]
+    return np.concatenate([xy, np.full((len(xy), 1), -ARM_CLEARANCE)], axis=1)
+
+
+def _move_timing(q: np.ndarray) -> tuple[np.ndarray, float]:
+    """Joint path (M, 7) -> (samples at uniform u (K, 7), seconds), by joint-space arc length."""
+    steps = np.abs(np.diff(q, axis=0)).max(1)
+    total = float(steps.sum())
+    if total < 1e-9:
+        return np.stack([q[0], q[-1]]), MIN_MOVE_SECONDS
+    s = np.concatenate([[0.0], np.cumsum(steps)]) / total
+    k = max(2, int(np.ceil(total / 0.02)) + 1)
+    u = np.linspace(0.0, 1.0, k)
+    samples = np.stack([np.interp(u, s, q[:, j]) for j in range(q.shape[1])], axis=1)
+    return samples, max(MIN_MOVE_SECONDS, 1.875 * total / MAX_JOINT_SPEED)
+
+
+def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.ndarray,
+             allow_rrt: bool) -> tuple[Plan | None, str, str]:
+    """The joint-space plan of ``script`` from ``base``; (None, reason, detail) when it fails."""
+    planner.set_base(base)
+    floor = floor_points(base)
+    anchor = np.concatenate([anchor, floor])
+    plan = Plan(base)
+    q = HOME_QPOS.copy()
+    k = 0
+    while k < len(script):
+        step = script[k]
+        if not isinstance(step, Move):
+            if isinstance(step, Path):
+                return None, PLANNING_FAILED, "a Cartesian piece without a move before it"
+            plan.steps.append(step)
+            k += 1
+            continue
+        # The Cartesian pieces (and the grasps between them) up to the next move.
+        j = k + 1
+        while j < len(script) and not isinstance(script[j], Move):
+            j += 1
+        pieces = [s for s in script[k + 1:j] if isinstance(s, Path)]
+        tcps = np.concatenate([p.sampled for p in pieces])
+        planner.set_cloud(np.concatenate([step.obstacles, floor]), MOVE_CLEARANCE)
+        touching = planner.collisions(q, ARM_LINKS + HAND_LINKS)
+        if touching:
+            return None, PLANNING_FAILED, f"the arm's start pose touches the observed scene ({', '.join(touching)})"
+        goals = planner.ik(step.tcp, _ik_seeds(), ARM_LINKS + HAND_LINKS)
+        if not goals:
+            return None, UNREACHABLE, "no collision-free IK solution for the pre-grasp pose"
+        planner.set_cloud(anchor, ARM_CLEARANCE)
+        chain = why = None
+        for goal in sorted(goals, key=lambda g: float(np.abs(g - q).max()))[:MAX_CHAIN_STARTS]:
+            chain, why = planner.chain(tcps, goal, ARM_LINKS)
+            if chain is not None:
+                break
+        if chain is None:
+            reason = PLANNING_FAILED if why.get("why") == "collision" else UNREACHABLE
+            links = f": {', '.join(why['links'])}" if why.get("links") else ""
+            return None, reason, (f"the arm cannot follow the path ({why.get('why')}{links} at pose "
+                                  f"{why.get('index')} of {len(tcps)})")
+        planner.set_cloud(np.concatenate([step.obstacles, floor]), MOVE_CLEARANCE)
+        if planner.line_clear(q, chain[0], ARM_LINKS + HAND_LINKS):
+            joint_path = np.stack([q, chain[0]])
+        else:
+            if not allow_rrt:
+                return None, PLANNING_FAILED, "no straight collision-free move to the pre-grasp pose"
+            joint_path = planner.rrt(q, chain[0], RRT_SECONDS)
+            if joint_path is None:
+                return None, PLANNING_FAILED, "RRTConnect found no collision-free move to the pre-grasp pose"
+        samples, seconds = _move_timing(joint_path)
+        plan.steps.append(Segment(samples, seconds, None, True))
+        start = 0
+        for s in script[k + 1:j]:
+            if isinstance(s, Path):
+                plan.steps.append(Segment(chain[start:start + s.samples], s.seconds, s.poses, s.check_stall))
+                start += s.samples
+            else:
+                plan.steps.append(s)
+        q = chain[-1]
+        k = j
+    return plan, "", ""
+
+
+def plan_script(planner: ArmPlanner, scripts: list[list], anchor: np.ndarray, obstacles: np.ndarray,
+                grasp_point: np.ndarray) -> tuple[Plan | None, str, str, int]:
+    """Try base placements in order, and at each the scripts in order (the same path with the
+    TCP rolled about its approach); straight moves first, then RRT on the first few
+    placements that reach the path. Returns (plan or None, reason, detail, placements tried);
+    ``plan.script_index`` says which script was planned."""
+    tcps = []
+    for s in scripts[0]:
+        if isinstance(s, Move):
+            tcps.append(s.tcp)
+        elif isinstance(s, Path):
+            tcps.extend([s.sampled[0], s.sampled[-1]])
+    candidates = base_candidates(anchor, obstacles, np.stack(tcps), grasp_point)
+    if not candidates:
+        return None, UNREACHABLE, "no free floor in front of the furniture for the arm's base", 0
+    reasons = []
+    retry = []
+    for n, base in enumerate(candidates, start=1):
+        for index, script in enumerate(scripts):
+            plan, reason, detail = _plan_at(planner, base, script, anchor, allow_rrt=False)
+            if plan is not None:
+                plan.script_index = index
+                return plan, "", "", n
+            reasons.append((reason, detail))
+            if reason == PLANNING_FAILED and detail.startswith("no straight"):
+                retry.append((base, index))
+    for base, index in retry[:MAX_RRT_CANDIDATES]:
+        plan, reason, detail = _plan_at(planner, base, scripts[index], anchor, allow_rrt=True)
+        if plan is not None:
+            plan.script_index = index
+            return plan, "", "", len(candidates)
+        reasons.append((reason, detail))
+    # The most telling reason: a placement that reached the poses but found no clear way.
+    for wanted in (PLANNING_FAILED, UNREACHABLE):
+        hits = [d for r, d in reasons if r == wanted]
+        if hits:
+            return None, wanted, f"{hits[0]} (all {len(candidates)} base placements failed)", len(candidates)
+    return None, UNREACHABLE, "no base placement reaches the path", len(candidates)
+
+
+# ---------------------------------------------------------------------------- execution
+class _Abort(Exception):
+    def __init__(self, reason: str, detail: str = ""):
+        super().__init__(detail)
+        self.reason, self.detail = reason, detail
+
+
+class _Runner:
+    def __init__(self, scene: ArmScene, stall_reason: str):
+        self.s = scene
+        self.seconds = 0.0
+        self.stall_reason = stall_reason
+        self.holding = False
+        self.executed: list[np.ndarray] = []
+
+    def tick(self) -> None:
+        self.s.step()
+        self.seconds += self.s.timestep
+        self.executed.append(self.s.arm.tcp_pose()[:3, 3])
+        detail = blown_up(self.s.velocities() + self.s.arm.velocities())
+        if detail:
+            raise _Abort(BLOW_UP, detail)
+
+    def wait(self, seconds: float) -> None:
+        for _ in range(int(round(seconds / self.s.timestep))):
+            self.tick()
+
+    def segment(self, seg: Segment) -> None:
+        arm = self.s.arm
+        n = max(1, int(round(seg.seconds / self.s.timestep)))
+        grid = np.linspace(0.0, 1.0, len(seg.q))
+
+        def q_at(u: float) -> np.ndarray:
+            return np.array([np.interp(u, grid, seg.q[:, j]) for j in range(seg.q.shape[1])])
+
+        for k in range(1, n + 1):
+            u = _smooth(k / n)
+            target = q_at(u)
+            speed = (q_at(_smooth(min(1.0, (k + 1) / n))) - target) / self.s.timestep
+            arm.set_joint_targets(target, speed)
+            self.tick()
+            if self.holding and self._slipped():
+                touching = self.s.held_touches_furniture
+                if touching is not None and touching():
+                    raise _Abort(COLLISION, "the furniture stopped the held object and pulled it off the cup")
+                raise _Abort(SLIPPED, "the object left the hand while moving")
+            if not seg.check_stall:
+                continue
+            if seg.poses is not None:
+                d, ang = _pose_distance(arm.tcp_pose(), seg.poses(u))
+                if d > STALL_DISTANCE or ang > STALL_ANGLE:
+                    raise _Abort(self.stall_reason, f"hand {d * 100:.1f} cm / {np.degrees(ang):.0f} deg behind its target"
+                                 + self._touching())
+            else:
+                lag = float(np.abs(arm.qpos() - target).max())
+                if lag > JOINT_STALL:
+                    raise _Abort(COLLISION, f"the arm was stopped on its way ({np.degrees(lag):.0f} deg behind)"
+                                 + self._touching())
+        arm.set_joint_targets(seg.q[-1])
+
+    def _touching(self) -> str:
+        touching = self.s.arm.contacts_with_others(self.s.ms_scene.px.get_contacts())
+        return f"; touching: {', '.join(touching)}" if touching else ""
+
+    def _slipped(self) -> bool:
+        arm = self.s.arm
+        if self.s.grasp_mode == "suction":
+            if arm.suction_stretch() > SUCTION_SLIP:
+                arm.detach()
+                return True
+            return False
+        return arm.opening < HELD_OPENING
+
+    def grasp(self, grasp: Grasp) -> None:
+        arm = self.s.arm
+        if self.s.grasp_mode == "suction":
+            self.wait(HOLD_SECONDS)
+            body = arm.touched_body(self.s.ms_scene.px.get_contacts())
+            if body is None:
+                raise _Abort(GRASP_MISSED, "the suction cup touched nothing")
+            arm.attach(self.s.ms_scene, body)
+        else:
+            arm.set_fingers(-0.02)
+            self.wait(CLOSE_SECONDS)
+            if arm.opening < HELD_OPENING:
+                raise _Abort(GRASP_MISSED, "the fingers closed on nothing")
+            if arm.opening > BLOCKED_OPENING:
+                raise _Abort(GRASP_MISSED, "the fingers could not close (nothing to pinch)")
+        self.holding = True
+
+    def release(self) -> None:
+        arm = self.s.arm
+        self.holding = False
+        arm.detach()
+        self.wait(HOLD_SECONDS)
+        arm.set_fingers(2 * FINGER_OPEN if self.s.grasp_mode != "suction" else 0.0)
+        self.wait(RELEASE_SECONDS)
+
+
+def _settle(scene: ArmScene) -> ExecutionResult:
+    return simulate_until_still(scene.step, scene.timestep, scene.velocities, scene.is_still)
+
+
+def _finish(run: _Runner | None, result: ExecutionResult, extra: dict) -> ExecutionResult:
+    if run is not None:
+        result.sim_seconds += run.seconds
+        result.details["executed_path"] = np.asarray(run.executed[::10]).round(4).tolist()
+    result.details.update(extra)
+    return result
+
+
+def _run(scene: ArmScene, scripts: list[list], rolls: tuple[float, ...], anchor: np.ndarray, obstacles: np.ndarray, grasp_point: np.ndarray,
+         extra: dict, stall_reason: str, free_joint: Callable[[], None] | None = None,
+         hold_joint: Callable[[], None] | None = None) -> ExecutionResult:
+    """Plan the script, then carry it out; a failure stops the arm, lets go, and the scene is scored as it is."""
+    try:
+        plan, reason, detail, tried = plan_script(scene.planner, scripts, anchor, obstacles, grasp_point)
+    except PlannerError as err:
+        plan, reason, detail, tried = None, PLANNING_FAILED, str(err), 0
+    extra["placements_tried"] = tried
+    if plan is None:
+        return _finish(None, ExecutionResult(ok=False, reason=reason, detail=detail), extra)
+    extra["arm_base"] = plan.base[:3, 3].round(4).tolist()
+    extra["tcp_roll_deg"] = float(np.degrees(rolls[plan.script_index]))
+    extra["arm_base_yaw_deg"] = float(np.degrees(np.arctan2(plan.base[1, 0], plan.base[0, 0])))
+    arm = scene.arm
+    opening = 0.0 if scene.grasp_mode == "suction" else 2 * FINGER_OPEN
+    arm.place(plan.base, HOME_QPOS, opening)
+    run = _Runner(scene, stall_reason)
+    try:
+        for step in plan.steps:
+            if isinstance(step, Segment):
+                run.segment(step)
+            elif isinstance(step, GraspStep):
+                run.grasp(step.grasp)
+            elif isinstance(step, ReleaseStep):
+                run.release()
+            elif isinstance(step, FreeJointStep) and free_joint is not None:
+                free_joint()
+    except _Abort as abort:
+        arm.detach()
+        arm.set_fingers(2 * FINGER_OPEN)
+        if abort.reason != BLOW_UP:
+            run.wait(RELEASE_SECONDS)
+        arm.park()
+        if hold_joint is not None:
+            hold_joint()
+        settled = _settle(scene) if abort.reason != BLOW_UP else ExecutionResult(ok=False)
+        result = ExecutionResult(ok=abort.reason != BLOW_UP, reason=abort.reason, detail=str(abort.detail),
+                                 sim_seconds=settled.sim_seconds, at_rest=settled.at_rest)
+        return _finish(run, result, extra)
+    arm.park()
+    if hold_joint is not None:
+        hold_joint()
+    return _finish(run, _settle(scene), extra)
+
+
+def _rolled(T: np.ndarray, roll: float) -> np.ndarray:
+    """TCP pose ``T`` (4, 4) turned by ``roll`` about its own approach (z) axis."""
+    c, s = np.cos(roll), np.sin(roll)
+    R = np.eye(4)
+    R[:2, :2] = [[c, -s], [s, c]]
+    return T @ R
+
+
+def _rolled_grasp(grasp: Grasp, roll: float) -> Grasp:
+    return Grasp(_rolled(grasp.tcp, roll), grasp.approach, grasp.width)
+
+
+def execute_articulated_panda(scene: ArmScene, action_points: np.ndarray, anchor_points: np.ndarray,
+                              cross_pose: np.ndarray, free_joint: Callable[[], None],
+                              hold_joint: Callable[[], None]) -> ExecutionResult:
+    """Grasp the door or drawer as the gripper does, move it along the predicted screw, release, settle."""
+    suction = scene.grasp_mode == "suction"
+    grasp = (suction_point if suction else articulated_grasp)(action_points, cross_pose)
+    if grasp is None:   # the prediction moves nothing: the arm has nothing to do
+        return _finish(None, _settle(scene), {"grasp_point": None})
+    extra = {"grasp_point": grasp.tcp[:3, 3].round(4).tolist(), "grasp_width": grasp.width}
+    path = interpolate(cross_pose, np.linspace(0, 1, 11)) @ grasp.tcp
+    extra["planned_path"] = path[:, :3, 3].round(4).tolist()
+    if _below_floor(path):
+        return _finish(None, ExecutionResult(ok=False, reason=UNREACHABLE, detail="the path goes under the floor"), extra)
+    scene_points = np.concatenate([anchor_points, action_points])
+    scripts = []
+    for roll in SYMMETRIC_ROLLS:
+        g = _rolled_grasp(grasp, roll)
+        screw = _screw(cross_pose, g.tcp)
+        scripts.append([*_approach(g, suction, scene_points), FreeJointStep(), screw,
+                        *_retreat(screw.poses(1.0), g.approach)])
+    # The base keeps clear of the door's predicted sweep too.
+    swept = np.concatenate([_moved(action_points, T) for T in interpolate(cross_pose, np.linspace(0, 1, 7))])
+    return _run(scene, scripts, SYMMETRIC_ROLLS, anchor_points, np.concatenate([anchor_points, swept]),
+                grasp.tcp[:3, 3], extra, STALLED_AGAINST_HINGE, free_joint, hold_joint)
+
+
+def _moved(points: np.ndarray, T: np.ndarray) -> np.ndarray:
+    return points @ T[:3, :3].T + T[:3, 3]
+
+
+def _turn_script(object_points: np.ndarray, anchor: np.ndarray, turn: float, roll: float) -> list:
+    """Pick the object by the middle of its top, turn it by ``turn`` about the vertical, put it down, let go."""
+    from scipy.spatial.transform import Rotation
+
+    top = _rolled_grasp(top_suction_point(object_points), roll)
+    lifted = top.tcp.copy()
+    lifted[2, 3] += REGRASP_LIFT
+    turned = lifted.copy()
+    turned[:3, :3] = Rotation.from_rotvec([0.0, 0.0, turn]).as_matrix() @ lifted[:3, :3]
+    down = turned.copy()
+    down[2, 3] = top.tcp[2, 3]
+    return [*_approach(top, True, np.concatenate([anchor, object_points])),
+            _line(top.tcp, lifted), _line(lifted, turned), _line(turned, down), *_retreat(down, top.approach)]
+
+
+def _side_entry(scene: ArmScene, plan, object_points: np.ndarray, anchor_points: np.ndarray,
+                obstacles: np.ndarray) -> ExecutionResult:
+    from wpbench.sim.side_entry import _turn_about_vertical, regrasp_centre
+
+    waypoints = plan.carry_waypoints()
+    extra = {"grasp_point": plan.pick[:3, 3].round(4).tolist(), "grasp_width": 0.0, "entry": "side",
+             "regrasp_turn_deg": float(np.degrees(plan.regrasp_turn)),
+             "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints]}
+    if _below_floor(np.stack(waypoints)):
+        return _finish(None, ExecutionResult(ok=False, reason=UNREACHABLE, detail="the path goes under the floor"), extra)
+    points_now = object_points
+    if plan.regrasp_turn:
+        points_now = _moved(object_points, _turn_about_vertical(plan.regrasp_turn, regrasp_centre(object_points)))
+    scripts = []
+    for roll in SYMMETRIC_ROLLS:   # the palm box side entry checked is symmetric under these
+        script = _turn_script(object_points, anchor_points, plan.regrasp_turn, roll) if plan.regrasp_turn else []
+        pick = Grasp(_rolled(plan.pick, roll), plan.pick[:3, 2].copy(), 0.0)
+        way = [_rolled(w, roll) for w in waypoints]
+        script += _approach(pick, True, np.concatenate([anchor_points, points_now]))
+        script += [_line(a, b) for a, b in zip(way[:-1], way[1:])]
+        script += _retreat(way[-1], plan.goal[:3, 2], plan.retreat())
+        scripts.append(script)
+    return _run(scene, scripts, SYMMETRIC_ROLLS, anchor_points, obstacles, plan.pick[:3, 3], extra, COLLISION)
+
+
+def execute_free_panda(scene: ArmScene, object_points: np.ndarray, anchor_points: np.ndarray,
+                       cross_pose: np.ndarray, viewpoint: np.ndarray | None = None) -> ExecutionResult:
+    """Put the object at the predicted goal along the gripper's path (side entry under a
+    roof, else from above), carried by the arm."""
+    suction = scene.grasp_mode == "suction"
+    goal_points = _moved(object_points, cross_pose)
+    obstacles = np.concatenate([anchor_points, object_points, goal_points])
+    if suction and is_roofed(object_points, anchor_points, cross_pose):
+        plan = plan_side_entry(object_points, anchor_points, cross_pose, viewpoint)
+        if plan is not None:
+            return _side_entry(scene, plan, object_points, anchor_points, obstacles)
+    grasp = top_suction_point(object_points) if suction else top_grasp(object_points)
+    if grasp is None:
+        return _finish(None, ExecutionResult(ok=False, reason=PLANNING_FAILED,
+                                             detail="the object is wider than the fingers open"), {"grasp_point": None})
+    start = grasp.tcp
+    goal = cross_pose @ start
+    rise = carry_height(object_points, anchor_points, start[:3, 3], goal[:3, 3])
+    if rise is None:
+        return _finish(None, ExecutionResult(ok=False, reason=PLANNING_FAILED,
+                                             detail="no carry height clears the observed furniture"), {"grasp_point": None})
+    lifted = start.copy()
+    above_goal = goal.copy()
+    travel_z = max(start[2, 3] + LIFT_HEIGHT, goal[2, 3] + max(CARRY_CLEARANCE, rise))
+    lifted[2, 3] = travel_z
+    above_goal[2, 3] = travel_z
+    waypoints = [start, lifted, above_goal, goal]
+    extra = {"grasp_point": start[:3, 3].round(4).tolist(), "grasp_width": grasp.width, "entry": "top",
+             "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints]}
+    if _below_floor(np.stack(waypoints)):
+        return _finish(None, ExecutionResult(ok=False, reason=UNREACHABLE, detail="the path goes under the floor"), extra)
+    # A suction cup from above may turn any way about the vertical; fingers only by half a turn.
+    rolls = TOP_SUCTION_ROLLS if suction else SYMMETRIC_ROLLS
+    scripts = []
+    for roll in rolls:
+        g = _rolled_grasp(grasp, roll)
+        way = [_rolled(w, roll) for w in waypoints]
+        scripts.append([*_approach(g, suction, np.concatenate([anchor_points, object_points])),
+                        *[_line(a, b) for a, b in zip(way[:-1], way[1:])], *_retreat(way[-1], g.approach)])
+    return _run(scene, scripts, rolls, anchor_points, obstacles, start[:3, 3], extra, COLLISION)
