@@ -30,7 +30,8 @@ instead of the task's own draw).
 
 Executor (``executor=``, one of ``wpbench.names.EXECUTORS``; docs/executors.md):
 ``"ideal"`` (default) drives the joint to the best-matching value / teleports the object;
-``"gripper"`` has a floating Panda hand carry the cross-pose out. Either way the executor
+``"gripper"`` has a floating Panda hand carry the cross-pose out; ``"panda"`` a Panda arm
+(planned with mplib). Every executor
 works from the stage's observed clouds and the predicted cross-pose only. Every stage
 result has ``failure_reason``: "" or a code of ``wpbench.sim.failure``.
 """
@@ -222,6 +223,11 @@ class CrossPoseEnv(BaseEnv):
             from wpbench.sim.gripper import FloatingGripper
 
             self.gripper = FloatingGripper(self.scene)
+        self.arm = None
+        if self.executor == "panda":
+            from wpbench.sim.panda_arm import PandaArm
+
+            self.arm = PandaArm(self.scene)
 
     def _floor_clearance(self) -> float:
         """How much to raise the furniture so its door never sweeps through the floor.
@@ -489,6 +495,8 @@ class CrossPoseEnv(BaseEnv):
             return ExecutionResult(ok=False, reason=failure.INVALID_PREDICTION, detail=f"invalid cross-pose: {err}")
         if self.executor == "gripper":
             return self._execute_with_gripper(state, T)
+        if self.executor == "panda":
+            return self._execute_with_panda(state, T)
         if state.kind == ARTICULATED:
             return execute_articulated(self.furniture, T, state.action_surface, self._physics_step, 1.0 / SIM_FREQ)
         return execute_free(self.free_body, T, self._physics_step, 1.0 / SIM_FREQ)
@@ -514,6 +522,28 @@ class CrossPoseEnv(BaseEnv):
         anchor = self.get_obs()["anchor_points"][0].numpy().astype(np.float64)
         # The robot knows where its own camera stood (the viewpoint of both observation modes).
         return execute_free_gripper(scene, action, anchor, T, viewpoint=np.asarray(self.view_eye, dtype=np.float64))
+
+    def _execute_with_panda(self, state: StageState, T: np.ndarray):
+        """The Panda arm, given this stage's observed clouds and T (never the truth)."""
+        from wpbench.sim.arm_planner import ArmPlanner
+        from wpbench.sim.panda_executor import ArmScene, execute_articulated_panda, execute_free_panda
+
+        action = self.get_obs()["action_points"][0].numpy().astype(np.float64)
+        anchor = self.get_obs()["anchor_points"][0].numpy().astype(np.float64)
+        if state.kind == ARTICULATED:
+            f = self.furniture
+            scene = ArmScene(self.arm, ArmPlanner.shared(), self.scene, self.grasp, self._physics_step, 1.0 / SIM_FREQ,
+                             velocities=lambda: [f.articulation.get_qvel()],
+                             is_still=lambda: abs(f.qvel) < JOINT_STILL_VEL)
+            return execute_articulated_panda(scene, action, anchor, T, f.free_target_joint, f.hold_target_joint_here)
+        body = self.free_body
+        scene = ArmScene(self.arm, ArmPlanner.shared(), self.scene, self.grasp, self._physics_step, 1.0 / SIM_FREQ,
+                         velocities=lambda: [np.asarray(body.linear_velocity), np.asarray(body.angular_velocity),
+                                             np.asarray(body.entity_pose.p)],
+                         is_still=lambda: np.linalg.norm(body.linear_velocity) < BODY_STILL_LIN
+                         and np.linalg.norm(body.angular_velocity) < BODY_STILL_ANG,
+                         held_touches_furniture=self._free_object_touches_furniture)
+        return execute_free_panda(scene, action, anchor, T, viewpoint=np.asarray(self.view_eye, dtype=np.float64))
 
     def _free_object_touches_furniture(self) -> bool:
         """The free object is pressed against the furniture (a contact with an impulse)."""
@@ -555,7 +585,7 @@ class CrossPoseEnv(BaseEnv):
             "failure_reason": "" if success else self._failure_reason(state, result),
             "failure_detail": "" if success else result.detail,
             "executor": self.executor,
-            "grasp": self.grasp if self.executor == "gripper" else "",
+            "grasp": self.grasp if self.executor in ("gripper", "panda") else "",
             "sim_seconds": result.sim_seconds,
             "observation_fallback": self.observation_fallback,
             "gt_cross_pose": T_gt.tolist(),
