@@ -10,8 +10,10 @@ cross-pose with the scripted executor (``env.step(T)``) and scores it.
 
 Observation (``obs_mode``):
     ``"camera"`` (default): point clouds from a SAPIEN depth + segmentation camera
-    at a random viewpoint in front of the furniture; ``"mesh"``: surface samples of
-    the collision geometry that are visible from that same viewpoint (no renderer needed).
+    at a random viewpoint in front of the furniture (``camera_noise=``: depth noise, holes
+    and segmentation errors of a real sensor, ``wpbench.sim.camera_noise``; clean by
+    default); ``"mesh"``: surface samples of the collision geometry that are visible from
+    that same viewpoint (no renderer needed).
     ``obs = {"action_points": (1, NA, 3), "anchor_points": (1, NB, 3)}`` (batched torch,
     as every ManiSkill env; wrap with ``CPUGymWrapper`` for numpy): the segmented clouds,
     what a robot's camera and segmenter would give. Nothing in it says which kind of goal
@@ -53,6 +55,7 @@ from wpbench.sim.executor import (BODY_STILL_ANG, BODY_STILL_LIN, JOINT_STILL_VE
                                   execute_free)
 from wpbench.sim.free_object import build_free_object, raw_body
 from wpbench.sim.furniture import SceneFurniture
+from wpbench.sim.camera_noise import apply_camera_noise
 from wpbench.sim.observation import camera_points_by_segment, fixed_size, sample_mesh_surface
 from wpbench.names import ARTICULATED, EXECUTORS, FREE, OBS_MODES
 from wpbench.sim import failure
@@ -66,6 +69,7 @@ AT_REST_JOINT_SPEED = 0.05        # rad/s or m/s: a joint slower than this is at
 AT_REST_LINEAR_SPEED = 0.05       # m/s: a free object slower than this (and ...)
 AT_REST_ANGULAR_SPEED = 0.5       # rad/s: ... turning slower than this is at rest
 CAMERA_FOV = 1.0           # rad, vertical
+CAMERA_NOISE_STREAM = 7       # tags the camera noise's random stream apart from the episode's others
 MESH_SAMPLES_PER_POINT = 4   # camera fallback: surface samples per observed point, before farthest-point sampling
 VIEW_SAMPLES_PER_M2 = 20000  # mesh mode: surface samples per m^2 tested for visibility (a few per z-buffer pixel)
 VIEW_RESOLUTION = 128        # mesh mode: z-buffer pixels per side
@@ -110,10 +114,16 @@ class CrossPoseEnv(BaseEnv):
         robot_uids=None,
         executor: str = "ideal",
         grasp: str = "suction",
+        camera_noise: dict | None = None,
         **kwargs,
     ):
         if obs_mode not in OBS_MODES:
             raise ValueError(f"unknown obs_mode {obs_mode!r}; valid: {', '.join(OBS_MODES)}")
+        from wpbench.sim.camera_noise import CameraNoise
+
+        self.camera_noise = CameraNoise.from_settings(camera_noise)
+        if obs_mode != "camera" and not self.camera_noise.is_clean:
+            raise ValueError("camera noise needs obs_mode='camera' (mesh observations have no camera)")
         if executor not in EXECUTORS:
             raise ValueError(f"unknown executor {executor!r}; valid: {', '.join(EXECUTORS)}")
         from wpbench.sim.gripper_executor import GRASPS
@@ -423,7 +433,12 @@ class CrossPoseEnv(BaseEnv):
         sensor.capture()
         position, seg = sensor.camera.get_picture(["Position", "Segmentation"])
         cam_to_world = sensor.camera.get_model_matrix()[0].cpu().numpy().astype(np.float64)
-        points, ids = camera_points_by_segment(position[0].cpu().numpy(), seg[0, ..., 1].cpu().numpy(), cam_to_world)
+        # Its own random stream (episode seed, stage), so a clean camera draws nothing and
+        # every other random choice of the episode stays what it is without noise.
+        noise_rng = np.random.default_rng([int(self._episode_seed[0]), self.stage_index, CAMERA_NOISE_STREAM])
+        position, ids_image = apply_camera_noise(position[0].cpu().numpy(), seg[0, ..., 1].cpu().numpy(),
+                                                 self.camera_noise, noise_rng)
+        points, ids = camera_points_by_segment(position, ids_image, cam_to_world)
         action_ids, anchor_ids = self._segment_ids()
         return points[np.isin(ids, list(action_ids))], points[np.isin(ids, list(anchor_ids))]
 

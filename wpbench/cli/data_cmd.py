@@ -7,6 +7,13 @@ from pathlib import Path
 import typer
 
 from wpbench import names
+from wpbench.cli.camera_noise_options import (
+    camera_noise_settings,
+    depth_holes_option,
+    depth_noise_option,
+    edge_holes_option,
+    seg_noise_option,
+)
 from wpbench.cli.choices import check_choice
 
 app = typer.Typer(help="Generate training data from the simulator.", add_completion=False, no_args_is_help=True)
@@ -18,6 +25,10 @@ def generate(
     samples_per_kind: int = typer.Option(1500, min=1, help="Samples of each kind (rounded up to whole shards)."),
     split: str = typer.Option("train", help=f"Furniture split: {', '.join(names.SPLITS)} (disjoint instances)."),
     obs: str = typer.Option("camera", help="Observation: camera (depth + segmentation) or mesh (surface samples)."),
+    depth_noise: float = depth_noise_option(),
+    depth_holes: float = depth_holes_option(),
+    edge_holes: bool = edge_holes_option(),
+    seg_noise_px: int = seg_noise_option(),
     seed: int = typer.Option(0, help="Base seed; every sample's episode seed is derived from it."),
     kind: list[str] = typer.Option(None, help=f"Only this kind (repeatable): {', '.join(names.KINDS)} [default: all]."),
     shard_size: int = typer.Option(50, min=1, help="Samples per shard file (lowered to fit small runs)."),
@@ -42,6 +53,7 @@ def generate(
 
     check_choice("split", split, names.SPLITS)
     check_choice("observation mode", obs, names.OBS_MODES)
+    camera_noise = camera_noise_settings(obs, depth_noise, depth_holes, edge_holes, seg_noise_px)
     kinds = tuple(kind) if kind else names.KINDS
     for k in kinds:
         check_choice("kind", k, names.KINDS)
@@ -60,7 +72,7 @@ def generate(
             split=split, obs=obs, seed=seed, samples_per_kind=samples_per_kind, kinds=kinds,
             shard_size=shard_size, scene_reuse=scene_reuse, wide_start_probability=wide_start_probability,
             num_action_points=num_action_points, num_anchor_points=num_anchor_points,
-            extra_train_instances=extra_train_instances, assets=assets,
+            extra_train_instances=extra_train_instances, assets=assets, camera_noise=camera_noise,
         )
         report = run_generation(out, config, progress=progress)
     except (ValueError, FileNotFoundError) as err:

@@ -7,6 +7,13 @@ from pathlib import Path
 import typer
 
 from wpbench import names
+from wpbench.cli.camera_noise_options import (
+    camera_noise_settings,
+    depth_holes_option,
+    depth_noise_option,
+    edge_holes_option,
+    seg_noise_option,
+)
 from wpbench.cli.choices import check_choice
 
 def _policy_names() -> list[str]:
@@ -24,6 +31,10 @@ def run(
     seed: int = typer.Option(0, help="Run seed; episode i uses a seed derived from (seed, i)."),
     assets: str = typer.Option("procedural", help="'procedural' (built-in furniture) or a PartNet-Mobility folder."),
     obs: str = typer.Option("camera", help="Observation: camera (depth + segmentation) or mesh (surface samples)."),
+    depth_noise: float = depth_noise_option(),
+    depth_holes: float = depth_holes_option(),
+    edge_holes: bool = edge_holes_option(),
+    seg_noise_px: int = seg_noise_option(),
     out: Path = typer.Option(None, help="Output folder [default: results/runs/<policy>__<task>__<split>__<assets>__<obs>]."),
     resume: bool = typer.Option(False, help="Skip episodes already written in --out."),
     record: Path = typer.Option(None, help="Write a rerun recording (.rrd) of the run."),
@@ -67,6 +78,7 @@ def run(
     check_choice("split", split, names.RUN_SPLITS)
     check_choice("observation mode", obs, names.OBS_MODES)
     check_choice("executor", executor, names.EXECUTORS)
+    camera_noise = camera_noise_settings(obs, depth_noise, depth_holes, edge_holes, seg_noise_px)
     if shard is not None:
         from wpbench.evaluation.runner import parse_shard
 
@@ -102,7 +114,7 @@ def run(
     cfg = RunConfig(policy=policy, task=task, split=split, episodes=episodes, seed=seed, assets=assets,
                     obs=obs, out=out, resume=resume, record=record, num_action_points=num_action_points,
                     num_anchor_points=num_anchor_points, policy_kwargs=policy_kwargs, executor=executor,
-                    shard=shard)
+                    shard=shard, camera_noise=camera_noise)
     if out is None and weights_root is not None:
         # Keep an experiment's runs beside its weights, away from the shipped results/runs/.
         cfg.out = weights_root / "runs" / cfg.default_out().name

@@ -29,6 +29,8 @@ class GenerationConfig:
         way from closed to open) instead of the task's own lower quarter, so the
         model also sees half-open doors. Validation keeps the task's distribution (0).
     objects: Ravens objects placed by the free-floating task.
+    camera_noise: camera observations only: a real sensor's errors, the fields of
+        ``wpbench.sim.camera_noise.CameraNoise`` that differ from a clean camera ({}).
     extra_train_instances: procedural furniture only: that many more train instances
         per category than the benchmark's library (12 train / 4 val), numbered after
         it, so the val furniture stays exactly the benchmark's and is never trained on.
@@ -49,6 +51,7 @@ class GenerationConfig:
     assets: str = "procedural"
     extra_train_instances: int = 0
     extra: dict = field(default_factory=dict)
+    camera_noise: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.split not in SPLITS:
@@ -65,6 +68,12 @@ class GenerationConfig:
                 f"shard_size ({self.shard_size}) must be a multiple of scene_reuse ({self.scene_reuse}) "
                 "so every shard starts with a fresh scene (shards are then independent and reproducible)"
             )
+        from wpbench.sim.camera_noise import CameraNoise
+
+        noise = CameraNoise.from_settings(self.camera_noise)
+        if self.obs != "camera" and not noise.is_clean:
+            raise ValueError("camera noise needs obs='camera'")
+        object.__setattr__(self, "camera_noise", noise.settings())  # frozen: only the normal form is kept
         if self.extra_train_instances < 0:
             raise ValueError(f"extra_train_instances must be >= 0, got {self.extra_train_instances}")
         if not 0.0 <= self.wide_start_probability <= 1.0:
@@ -84,6 +93,8 @@ class GenerationConfig:
             d.pop(key)
         if not d["extra_train_instances"]:
             d.pop("extra_train_instances")  # data made before the option existed keeps its fingerprint
+        if not d["camera_noise"]:
+            d.pop("camera_noise")  # likewise: a clean camera is what older data saw
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
     def to_json(self) -> dict:

@@ -63,6 +63,8 @@ def make_env(config: GenerationConfig, kind: str):
     )
     if kind == FREE:
         kwargs["objects"] = tuple(config.objects)
+    if config.camera_noise:
+        kwargs["camera_noise"] = dict(config.camera_noise)
     if config.extra_train_instances and config.split == "train":
         kwargs["extra_train_instances"] = config.extra_train_instances
     return gym.make(env_id, **kwargs)

@@ -120,6 +120,7 @@ class RunFolder:
         meta = {
             "policy": cfg.policy, "task": cfg.task, "split": cfg.split, "asset_source": cfg.assets,
             "obs": cfg.obs, "seed": cfg.seed, "executor": cfg.executor, "shard": cfg.shard,
+            "camera_noise": dict(cfg.camera_noise),
             # Episode times come from the records, so a resumed run reports the whole run;
             # peak memory is this session's (a resumed run keeps its largest session's).
             "timings": {"wall_s": float(sum(r.get("timings", {}).get("episode_s", 0.0) for r in records)),

@@ -108,6 +108,16 @@ def _get(summary: dict[str, Any], key: str, field: str | None = None) -> float:
     return math.nan if value is None else float(value)
 
 
+def _obs_label(summary: dict[str, Any]) -> str:
+    """The observation mode, with the camera noise's tag for a noisy camera (camera-depth0.002)."""
+    from wpbench.sim.camera_noise import CameraNoise
+
+    meta = summary.get("meta") or {}
+    obs = meta.get("obs") or summary.get("obs") or "-"
+    tag = CameraNoise.from_settings(meta.get("camera_noise") or {}).tag()
+    return f"{obs}-{tag}" if tag else obs
+
+
 def _row(summary: dict[str, Any], run: str) -> dict[str, Any]:
     ci = summary.get("success_ci95") or [None, None]
     instance_ci = summary.get("success_instance_ci95") or [None, None]
@@ -118,7 +128,7 @@ def _row(summary: dict[str, Any], run: str) -> dict[str, Any]:
         "policy": summary.get("policy") or "?",
         "split": summary.get("split") or "-",
         "asset_source": summary.get("asset_source") or "-",
-        "obs": (summary.get("meta") or {}).get("obs") or summary.get("obs") or "-",
+        "obs": _obs_label(summary),
         # Runs made before executors existed used the ideal one.
         "executor": (summary.get("meta") or {}).get("executor") or "ideal",
         "episodes": int(summary.get("episodes") or 0),

@@ -52,12 +52,17 @@ class RunConfig:
     policy_kwargs: dict = field(default_factory=dict)
     executor: str = "ideal"
     shard: str | None = None  # "i/N": only the episodes whose index is i modulo N
+    camera_noise: dict = field(default_factory=dict)  # wpbench.sim.camera_noise.CameraNoise fields; {}: clean
 
     def default_out(self, results: Path | str = "results") -> Path:
-        """``<results>/runs/<policy>__<task>__<split>__<assets>__<obs>`` (plus ``__<executor>``
-        for another executor than the ideal one, ``__shard<i>of<N>`` for a shard)."""
+        """``<results>/runs/<policy>__<task>__<split>__<assets>__<obs>`` (the obs with the camera
+        noise's tag, e.g. ``camera-depth0.002``, for a noisy camera; plus ``__<executor>`` for
+        another executor than the ideal one, ``__shard<i>of<N>`` for a shard)."""
+        from wpbench.sim.camera_noise import CameraNoise
+
         source = "procedural" if self.assets == "procedural" else Path(self.assets).name
-        name = f"{self.policy}__{self.task}__{self.split}__{source}__{self.obs}"
+        noise = CameraNoise.from_settings(self.camera_noise).tag()
+        name = f"{self.policy}__{self.task}__{self.split}__{source}__{self.obs}" + (f"-{noise}" if noise else "")
         if self.executor != "ideal":
             name += f"__{self.executor}"
         if self.shard is not None:
@@ -102,7 +107,9 @@ def make_env(cfg: RunConfig):
     split = run_split(cfg.assets, cfg.split)
     # The ideal executor is the env's own default: naming it keeps envs that take no
     # executor argument working.
+    # So do a clean camera's settings (envs of plugins may not know camera noise).
     executor = {} if cfg.executor == "ideal" else {"executor": cfg.executor}
+    noise = {"camera_noise": dict(cfg.camera_noise)} if cfg.camera_noise else {}
     return gym.make(
         info.env_id,
         obs_mode=cfg.obs,
@@ -111,6 +118,7 @@ def make_env(cfg: RunConfig):
         num_action_points=cfg.num_action_points,
         num_anchor_points=cfg.num_anchor_points,
         **executor,
+        **noise,
     )
 
 

@@ -30,10 +30,10 @@ class FridgeRanges:
     door_thickness: tuple[float, float] = (0.05, 0.08)
     foot_height: tuple[float, float] = (0.02, 0.05)
     freezer_fraction: tuple[float, float] = (0.25, 0.33)
-    # The goal is the joint's upper limit, which no point cloud shows: a range here is
-    # label noise no policy can remove (100-180 deg made the best constant guess 20 deg
-    # off on average). A fixed door stop, like the oven's 90 deg, keeps the goal a
-    # function of what the camera sees; widen the range to study that ambiguity.
+    # The goal is the joint's upper limit, which no point cloud shows, so a range here is
+    # label noise no policy can remove (docs/experiment-log.md). A fixed door stop, like
+    # the oven's 90 deg, keeps the goal a function of what the camera sees; widen the
+    # range to study that ambiguity.
     open_angle_deg: tuple[float, float] = (120.0, 120.0)
     door_mass: tuple[float, float] = (4.0, 8.0)
     min_compartment: float = 0.24  # height between shelves, so a 16 cm block fits with margin
