@@ -57,3 +57,19 @@ def test_real_object_runs_get_their_own_section_only_when_there_are_some():
     assert "| wp-postsvd | not run | 65% [43, 82] (n=20) | not run |" in section
     assert "| gf | not run | not run | not run |" in section  # the built-in 90% stays in its own table
     assert "| gf | 90% [80, 95] (n=100) | not run | not run |" in lines[:start]
+
+
+def test_test_split_runs_stand_beside_val_and_the_camera_settings_are_named():
+    cfg = PaperTableConfig(policies=("wp-postsvd",))
+    val = {("wp-postsvd", "open-door"): {"success_rate": 0.9, "success_ci95": [0.8, 0.95], "episodes": 100,
+                                         "meta": {"camera_noise": {}}}}
+    test = {("wp-postsvd", "open-door"): {"success_rate": 0.7, "success_ci95": [0.6, 0.8], "episodes": 100,
+                                          "meta": {"camera_noise": {"depth_std": 0.002}}}}
+    assert "test split" not in render(cfg, {}, val)
+    assert "saw a clean camera" in render(cfg, {}, val)
+    text = render(cfg, {}, val, test_successes=test)
+    lines = text.splitlines()
+    start = next(i for i, line in enumerate(lines) if "test split" in line and line.startswith("##"))
+    assert "| wp-postsvd | 70% [60, 80] (n=100) | not run | not run |" in lines[start:]
+    assert "| wp-postsvd | 90% [80, 95] (n=100) | not run | not run |" in lines[:start]
+    assert "camera noise depth0.002 and a clean camera" in text

@@ -102,8 +102,8 @@ def category_errors(cfg: PaperTableConfig, policy: str) -> dict[str, dict[str, d
     return out
 
 
-def run_dir(cfg: PaperTableConfig, policy: str, task: str, source: str = "procedural") -> Path:
-    return Path(cfg.results) / "runs" / f"{policy}__{task}__val__{source}__{cfg.obs}"
+def run_dir(cfg: PaperTableConfig, policy: str, task: str, source: str = "procedural", split: str = "val") -> Path:
+    return Path(cfg.results) / "runs" / f"{policy}__{task}__{split}__{source}__{cfg.obs}"
 
 
 def _read_summary(directory: Path) -> dict | None:
@@ -116,6 +116,21 @@ def _read_summary(directory: Path) -> dict | None:
 def real_success(cfg: PaperTableConfig, policy: str, task: str) -> dict | None:
     """The run's summary on the real objects, or None (never run from here: it needs their folder)."""
     return _read_summary(run_dir(cfg, policy, task, REAL_SOURCE))
+
+
+def test_success(cfg: PaperTableConfig, policy: str, task: str) -> dict | None:
+    """The run's summary on the test split, or None. Never run from here: test is scored once
+    per release of the weights, by an explicit sweep, after every choice is made (docs/design.md)."""
+    return _read_summary(run_dir(cfg, policy, task, split="test"))
+
+
+def camera_settings(summaries: list[dict]) -> str:
+    """What camera the runs of the table saw: "a clean camera" or the noise settings they name."""
+    from wpbench.sim.camera_noise import CameraNoise
+
+    tags = sorted({CameraNoise.from_settings((s.get("meta") or {}).get("camera_noise") or {}).tag() for s in summaries})
+    named = [tag for tag in tags if tag]
+    return "a clean camera" if not named else "camera noise " + ", ".join(named) + (" and a clean camera" if "" in tags else "")
 
 
 def success(cfg: PaperTableConfig, policy: str, task: str) -> dict | None:
@@ -168,10 +183,13 @@ def _success_table(cfg: PaperTableConfig, title: str, successes: dict) -> list[s
 
 
 def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: dict | None = None,
-           real_successes: dict | None = None) -> str:
-    """``successes`` / ``real_successes``: {(policy, task): summary} on the built-in val furniture /
-    the real objects (that section only when there is at least one such run)."""
+           real_successes: dict | None = None, test_successes: dict | None = None) -> str:
+    """``successes`` / ``real_successes`` / ``test_successes``: {(policy, task): summary} on the
+    built-in val furniture / the real objects / the built-in test furniture (those two sections
+    only when there is at least one such run)."""
     by_category = by_category or {}
+    test_successes = test_successes or {}
+    seen = [*successes.values(), *(real_successes or {}).values(), *test_successes.values()]
     lines = ["# WeightedPose, paper Table 1 layout (wpbench)", "",
              "Made by `wpbench paper-table`. Pose errors are on the generated data set "
              f"(`{cfg.data}`, up to {cfg.samples_per_kind} samples per split and kind, camera point clouds, "
@@ -179,7 +197,9 @@ def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: di
              f"{', every second one mirrored,' if cfg.mirror_views and cfg.subsets > 1 else ''} "
              "fused into one pose as in the benchmark); "
              "success rates are simulated episodes on the val split (unseen built-in furniture), "
-             f"obs `{cfg.obs}`, with 95% Wilson intervals.", "",
+             f"obs `{cfg.obs}`, with 95% Wilson intervals. The runs saw {camera_settings(seen)}; the shipped "
+             "weights were trained on camera clouds from a clean camera (no depth noise, holes or "
+             "segmentation errors: `wpbench data generate`'s defaults).", "",
              "## Pose errors (rotation deg / translation cm / per-point cm)", ""]
     header = "| policy | " + " | ".join(f"{s} {k}" for s in SPLITS for k in KINDS) + " |"
     lines += [header, "|" + "---|" * (1 + len(SPLITS) * len(KINDS))]
@@ -205,6 +225,9 @@ def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: di
             cells = [f"{_fmt(per[c]['rot_deg'])} / {_fmt(per[c]['trans_m'], 100)}" if c in per else "-" for c in categories]
             lines.append(f"| {policy} | {kind} | " + " | ".join(cells) + " |")
     lines += _success_table(cfg, f"## Simulated success rate (val split, {cfg.obs})", successes)
+    if test_successes:
+        lines += _success_table(cfg, f"## Simulated success rate (test split, {cfg.obs}; scored once for these "
+                                     "weights)", test_successes)
     if real_successes:
         lines += _success_table(cfg, f"## Simulated success rate on real PartNet-Mobility objects ({cfg.obs}; "
                                      "trained on built-in furniture only)", real_successes)
@@ -212,7 +235,7 @@ def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: di
 
 
 def make_paper_table(cfg: PaperTableConfig, out: Path | None = None) -> Path:
-    errors, successes, by_category, real_successes = {}, {}, {}, {}
+    errors, successes, by_category, real_successes, test_successes = {}, {}, {}, {}, {}
     for policy in cfg.policies:
         try:
             errors[policy] = pose_errors(cfg, policy)
@@ -226,10 +249,13 @@ def make_paper_table(cfg: PaperTableConfig, out: Path | None = None) -> Path:
             summary = success(cfg, policy, task)
             if summary is not None:
                 successes[(policy, task)] = summary
+            test = test_success(cfg, policy, task)
+            if test is not None:
+                test_successes[(policy, task)] = test
             real = real_success(cfg, policy, task)
             if real is not None:
                 real_successes[(policy, task)] = real
     out = Path(out) if out is not None else Path(cfg.results) / "paper-table.md"
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(render(cfg, errors, successes, by_category, real_successes))
+    out.write_text(render(cfg, errors, successes, by_category, real_successes, test_successes))
     return out
