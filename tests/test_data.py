@@ -228,3 +228,22 @@ def test_extra_train_instances_change_the_fingerprint_only_when_used():
     assert GenerationConfig(split="train", extra_train_instances=48).sample_fingerprint() != plain.sample_fingerprint()
     with pytest.raises(ValueError, match="extra_train_instances"):
         GenerationConfig(split="train", extra_train_instances=-1)
+
+
+@pytest.mark.slow
+def test_two_workers_write_the_same_shards_as_one(tmp_path):
+    config = _tiny_config(samples_per_kind=4)   # two shards of each kind
+    serial = generate(tmp_path / "serial", config, progress=False)
+    parallel = generate(tmp_path / "parallel", config, progress=False, workers=2)
+    assert serial.written_shards == parallel.written_shards == 4
+    for kind in (ARTICULATED, FREE):
+        for index in range(2):
+            one = read_shard(shard_path(tmp_path / "serial" / "train", kind, index))
+            two = read_shard(shard_path(tmp_path / "parallel" / "train", kind, index))
+            assert set(one) == set(two)
+            for key in one:
+                if one[key].dtype.kind in "fc":
+                    np.testing.assert_array_equal(one[key], two[key], err_msg=key)
+                else:
+                    assert np.array_equal(one[key], two[key]), key
+    assert read_manifest(tmp_path / "parallel" / "train")["counts"] == {ARTICULATED: 4, FREE: 4}

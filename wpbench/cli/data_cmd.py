@@ -43,6 +43,8 @@ def generate(
     assets: str = typer.Option("procedural", help="'procedural' (built-in furniture) or a folder of your own "
                                "PartNet-Mobility objects split with `wpbench assets split`."),
     progress: bool = typer.Option(True, help="Show a progress bar."),
+    workers: int = typer.Option(1, min=1, help="Processes drawing whole shards side by side; the shards are the "
+                                               "same whatever the number."),
 ) -> None:
     """Sample (action cloud, anchor cloud, cross-pose) triples into OUT/<split>/ shards + manifest.json.
 
@@ -74,7 +76,7 @@ def generate(
             num_action_points=num_action_points, num_anchor_points=num_anchor_points,
             extra_train_instances=extra_train_instances, assets=assets, camera_noise=camera_noise,
         )
-        report = run_generation(out, config, progress=progress)
+        report = run_generation(out, config, progress=progress, workers=workers)
     except (ValueError, FileNotFoundError) as err:
         typer.echo(f"Error: {err}", err=True)
         raise typer.Exit(2)

@@ -146,15 +146,49 @@ def own_objects_config(config: GenerationConfig) -> GenerationConfig:
     return replace(config, assets=str(folder.resolve()))
 
 
+_WORKER_ENVS: dict[str, object] = {}   # one env per kind in each worker process, built on first use
+
+
+def _draw_shard(config: GenerationConfig, directory: Path, kind: str, shard: int,
+                envs: dict[str, object], on_sample: Callable[[str, int], None] | None = None) -> int:
+    """Draw shard ``shard`` of ``kind`` with ``envs``' env (made when missing) and write it."""
+    if kind not in envs:
+        envs[kind] = make_env(config, kind)
+    samples = []
+    for i in range(shard * config.shard_size, (shard + 1) * config.shard_size):
+        samples.append(draw_sample(envs[kind], config, kind, i))
+        if on_sample is not None:
+            on_sample(kind, i)
+    write_shard(shard_path(directory, kind, shard), stack_samples(samples, config.sample_fingerprint()))
+    return len(samples)
+
+
+def _draw_shard_in_worker(config: GenerationConfig, directory: Path, kind: str, shard: int) -> int:
+    return _draw_shard(config, directory, kind, shard, _WORKER_ENVS)
+
+
+def _one_thread_per_worker() -> None:
+    import torch
+
+    torch.set_num_threads(1)
+
+
 def generate(
     root: Path,
     config: GenerationConfig,
     progress: bool = True,
     on_sample: Callable[[str, int], None] | None = None,
+    workers: int = 1,
 ) -> GenerationReport:
-    """Write the shards of ``config`` under ``root/<split>/`` that do not exist yet, then the manifest."""
+    """Write the shards of ``config`` under ``root/<split>/`` that do not exist yet, then the manifest.
+
+    ``workers`` > 1 draws whole shards in that many processes. A shard starts with a fresh
+    scene and depends only on its index, so the shards are the same whatever the number.
+    """
     from tqdm import tqdm
 
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
     config = own_objects_config(config)
     directory = split_dir(root, config.split)
     todo = [(kind, i) for kind in config.kinds for i in range(config.shards_per_kind())
@@ -164,23 +198,37 @@ def generate(
     new_samples, started = 0, time.perf_counter()
     bar = tqdm(total=len(todo) * config.shard_size, disable=not progress, unit="sample", dynamic_ncols=True,
                desc=f"{config.split} ({skipped} shards already done)")
+
+    def shard_written(count: int) -> None:
+        nonlocal new_samples
+        new_samples += count
+        elapsed = time.perf_counter() - started
+        # Keep the manifest current so training can start on the shards written so far.
+        write_manifest(directory, build_manifest(directory, config, {"in_progress": True}))
+        bar.set_postfix(samples_per_s=f"{new_samples / max(elapsed, 1e-9):.2f}")
+
     envs: dict[str, object] = {}
     try:
-        for kind, shard in todo:
-            if kind not in envs:
-                envs[kind] = make_env(config, kind)
-            samples = []
-            for i in range(shard * config.shard_size, (shard + 1) * config.shard_size):
-                samples.append(draw_sample(envs[kind], config, kind, i))
+        if workers == 1 or len(todo) <= 1:
+            def counted(kind: str, index: int) -> None:
                 bar.update(1)
                 if on_sample is not None:
-                    on_sample(kind, i)
-            write_shard(shard_path(directory, kind, shard), stack_samples(samples, config.sample_fingerprint()))
-            new_samples += len(samples)
-            elapsed = time.perf_counter() - started
-            # Keep the manifest current so training can start on the shards written so far.
-            write_manifest(directory, build_manifest(directory, config, {"in_progress": True}))
-            bar.set_postfix(samples_per_s=f"{new_samples / max(elapsed, 1e-9):.2f}")
+                    on_sample(kind, index)
+
+            for kind, shard in todo:
+                shard_written(_draw_shard(config, directory, kind, shard, envs, counted))
+        else:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+
+            context = multiprocessing.get_context("spawn")   # SAPIEN and torch do not survive fork
+            with ProcessPoolExecutor(min(workers, len(todo)), mp_context=context,
+                                     initializer=_one_thread_per_worker) as pool:
+                futures = [pool.submit(_draw_shard_in_worker, config, directory, kind, shard) for kind, shard in todo]
+                for future in as_completed(futures):
+                    count = future.result()
+                    bar.update(count)
+                    shard_written(count)
     finally:
         bar.close()
         for env in envs.values():
