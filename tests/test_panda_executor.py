@@ -1,0 +1,109 @@
+"""The panda executor against physics on fixed val episodes: gt opens the door and places
+the block, identity does not, a 30-degree rotated door fails, results repeat by seed, and a
+goal far out of the arm's reach is a failure with a reason, not a crash. Plus the base
+placement rule on made-up clouds."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from wpbench import tasks  # noqa: F401
+from wpbench.sim.arm_placement import BASE_RADIUS, base_candidates, front_direction
+from wpbench.sim.failure import FAILURE_REASONS, PLANNING_FAILED, UNREACHABLE
+
+
+@pytest.fixture(scope="module")
+def door_env():
+    env = gym.make("wpbench/OpenDoor-v0", obs_mode="mesh", assets="procedural", split="val", executor="panda")
+    yield env
+    env.close()
+
+
+@pytest.fixture(scope="module")
+def place_env():
+    env = gym.make("wpbench/PlaceIn-v0", obs_mode="mesh", assets="procedural", split="val", executor="panda")
+    yield env
+    env.close()
+
+
+def _step(env, seed, transform_of):
+    env.reset(seed=seed)
+    T = transform_of(env.unwrapped.ground_truth()["cross_pose"])
+    _, _, _, _, info = env.step(T)
+    return info["stage_result"]
+
+
+def _rotated_30(T, seed):
+    axis = np.random.default_rng(seed).normal(size=3)
+    R = np.eye(4)
+    R[:3, :3] = Rotation.from_rotvec(np.radians(30) * axis / np.linalg.norm(axis)).as_matrix()
+    return R @ T
+
+
+def _far_up(T):
+    """The same motion, then 3 m up: far above anything a Panda standing on the floor reaches."""
+    up = np.eye(4)
+    up[2, 3] = 3.0
+    return up @ T
+
+
+@pytest.mark.parametrize("seed", [0, 6])
+def test_gt_opens_identity_does_not(door_env, seed):
+    r = _step(door_env, seed, lambda T: T)
+    assert r["success"] and r["executor"] == "panda", (r["failure_reason"], r["failure_detail"])
+    assert len(r["arm_base"]) == 3 and r["placements_tried"] >= 1
+    r = _step(door_env, seed, lambda T: np.eye(4))
+    assert not r["success"] and r["failure_reason"] == "not_open_enough"
+
+
+def test_rotated_door_fails(door_env):
+    r = _step(door_env, 0, lambda T: _rotated_30(T, 0))
+    assert not r["success"] and r["failure_reason"] in FAILURE_REASONS
+
+
+def test_same_seed_same_outcome(door_env):
+    a = _step(door_env, 1, lambda T: T)
+    b = _step(door_env, 1, lambda T: T)
+    assert a["success"] == b["success"] and a["failure_reason"] == b["failure_reason"]
+    assert a["arm_base"] == b["arm_base"] and a["q_final"] == b["q_final"]
+    assert a["executed_path"] == b["executed_path"]
+
+
+def test_goal_out_of_reach_is_a_failure_reason(door_env, place_env):
+    r = _step(door_env, 0, _far_up)
+    assert not r["success"] and not r["executed"] and r["failure_reason"] in (UNREACHABLE, PLANNING_FAILED)
+    assert r["failure_detail"]
+    r = _step(place_env, 5, _far_up)
+    assert not r["success"] and r["failure_reason"] in (UNREACHABLE, PLANNING_FAILED), r["failure_detail"]
+
+
+def test_gt_places_identity_does_not(place_env):
+    r = _step(place_env, 5, lambda T: T)
+    assert r["success"] and r["executor"] == "panda", (r["failure_reason"], r["failure_detail"])
+    r = _step(place_env, 5, lambda T: np.eye(4))
+    assert not r["success"]
+
+
+def test_placement_stands_in_front_and_clear():
+    rng = np.random.default_rng(0)
+    # A 60 cm cabinet around the origin; its door handle on the +x face.
+    corners = np.array([[x, y, z] for x in (-0.3, 0.3) for y in (-0.3, 0.3) for z in (0.0, 0.8)])
+    cabinet = np.concatenate([corners, rng.uniform([-0.3, -0.3, 0.0], [0.3, 0.3, 0.8], size=(2000, 3))])
+    grasp_point = np.array([0.32, 0.1, 0.5])
+    tcp = np.eye(4)
+    tcp[:3, 3] = grasp_point
+    assert np.allclose(front_direction(cabinet, grasp_point)[:2], grasp_point[:2] / np.linalg.norm(grasp_point[:2]))
+    candidates = base_candidates(cabinet, cabinet, tcp[None], grasp_point)
+    assert candidates
+    for base in candidates:
+        xy = base[:2, 3]
+        assert np.min(np.linalg.norm(cabinet[:, :2] - xy, axis=1)) >= BASE_RADIUS
+        facing = base[:2, 0]
+        to_path = grasp_point[:2] - xy
+        assert facing @ to_path / np.linalg.norm(to_path) > 0.999
+    # An obstacle where the first candidate stood removes it.
+    blocker = np.concatenate([cabinet, candidates[0][None, :3, 3] + [0.0, 0.0, 0.1]])
+    assert not any(np.allclose(b, candidates[0]) for b in base_candidates(cabinet, blocker, tcp[None], grasp_point))
