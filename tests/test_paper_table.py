@@ -12,7 +12,7 @@ def test_render_puts_each_number_in_its_cell():
     cfg = PaperTableConfig(policies=("gf", "tp"))
     errors = {"gf": {(s, k): {"rot_deg": 1.25 if k == "articulated" else 40.0, "trans_m": 0.012,
                               "point_m": 0.034, "n": 10} for s in SPLITS for k in KINDS}}
-    successes = {("gf", "open-door"): {"success_rate": 0.9, "success_ci95": [0.8, 0.95], "episodes": 100}}
+    successes = {("gf", "ideal", "open-door"): {"success_rate": 0.9, "success_ci95": [0.8, 0.95], "episodes": 100}}
     text = render(cfg, errors, successes)
     gf_row = next(line for line in text.splitlines() if line.startswith("| gf |") and "/" in line)
     cells = [c.strip() for c in gf_row.strip("|").split("|")][1:]
@@ -48,28 +48,56 @@ def test_category_rows_show_each_category_of_each_kind():
 
 def test_real_object_runs_get_their_own_section_only_when_there_are_some():
     cfg = PaperTableConfig(policies=("gf", "wp-postsvd"))
-    built_in = {("gf", "open-door"): {"success_rate": 0.9, "success_ci95": [0.8, 0.95], "episodes": 100}}
-    real = {("wp-postsvd", "place-in"): {"success_rate": 0.65, "success_ci95": [0.43, 0.82], "episodes": 20}}
+    built_in = {("gf", "ideal", "open-door"): {"success_rate": 0.9, "success_ci95": [0.8, 0.95], "episodes": 100}}
+    real = {("wp-postsvd", "ideal", "place-in"): {"success_rate": 0.65, "success_ci95": [0.43, 0.82], "episodes": 20}}
     assert "PartNet-Mobility" not in render(cfg, {}, built_in)
     lines = render(cfg, {}, built_in, real_successes=real).splitlines()
     start = next(i for i, line in enumerate(lines) if "real PartNet-Mobility" in line)
     section = lines[start:]
-    assert "| wp-postsvd | not run | 65% [43, 82] (n=20) | not run |" in section
-    assert "| gf | not run | not run | not run |" in section  # the built-in 90% stays in its own table
-    assert "| gf | 90% [80, 95] (n=100) | not run | not run |" in lines[:start]
+    assert "| wp-postsvd | ideal | not run | 65% [43, 82] (n=20) | not run |" in section
+    assert "| gf | ideal | not run | not run | not run |" in section  # the built-in 90% stays in its own table
+    assert "| gf | ideal | 90% [80, 95] (n=100) | not run | not run |" in lines[:start]
 
 
 def test_test_split_runs_stand_beside_val_and_the_camera_settings_are_named():
     cfg = PaperTableConfig(policies=("wp-postsvd",))
-    val = {("wp-postsvd", "open-door"): {"success_rate": 0.9, "success_ci95": [0.8, 0.95], "episodes": 100,
+    val = {("wp-postsvd", "ideal", "open-door"): {"success_rate": 0.9, "success_ci95": [0.8, 0.95], "episodes": 100,
                                          "meta": {"camera_noise": {}}}}
-    test = {("wp-postsvd", "open-door"): {"success_rate": 0.7, "success_ci95": [0.6, 0.8], "episodes": 100,
+    test = {("wp-postsvd", "ideal", "open-door"): {"success_rate": 0.7, "success_ci95": [0.6, 0.8], "episodes": 100,
                                           "meta": {"camera_noise": {"depth_std": 0.002}}}}
     assert "test split" not in render(cfg, {}, val)
     assert "saw a clean camera" in render(cfg, {}, val)
     text = render(cfg, {}, val, test_successes=test)
     lines = text.splitlines()
     start = next(i for i, line in enumerate(lines) if "test split" in line and line.startswith("##"))
-    assert "| wp-postsvd | 70% [60, 80] (n=100) | not run | not run |" in lines[start:]
-    assert "| wp-postsvd | 90% [80, 95] (n=100) | not run | not run |" in lines[:start]
+    assert "| wp-postsvd | ideal | 70% [60, 80] (n=100) | not run | not run |" in lines[start:]
+    assert "| wp-postsvd | ideal | 90% [80, 95] (n=100) | not run | not run |" in lines[:start]
     assert "camera noise depth0.002 and a clean camera" in text
+
+
+def test_other_executors_get_rows_beside_ideal_only_when_they_have_runs():
+    cfg = PaperTableConfig(policies=("wp",))
+    ideal = {("wp", "ideal", "open-door"): {"success_rate": 0.9, "success_ci95": [0.8, 0.95], "episodes": 100}}
+    assert "| wp | gripper |" not in render(cfg, {}, ideal)
+    both = {**ideal, ("wp", "gripper", "open-then-place"): {"success_rate": 0.8, "success_ci95": [0.7, 0.9],
+                                                           "episodes": 100}}
+    lines = render(cfg, {}, both).splitlines()
+    assert "| wp | ideal | 90% [80, 95] (n=100) | not run | not run |" in lines
+    assert "| wp | gripper | not run | not run | 80% [70, 90] (n=100) |" in lines
+    assert "| wp | panda |" not in "\n".join(lines)
+
+
+def test_runs_are_read_from_each_executors_folder(tmp_path: Path):
+    import json
+
+    from wpbench.evaluation.paper_table import run_dir, success
+
+    cfg = PaperTableConfig(results=tmp_path)
+    folder = run_dir(cfg, "wp", "open-door", executor="gripper")
+    assert folder.name == "wp__open-door__val__procedural__camera__gripper"
+    folder.mkdir(parents=True)
+    (folder / "summary.json").write_text(json.dumps({"success_rate": 0.5}))
+    assert success(cfg, "wp", "open-door", "gripper") == {"success_rate": 0.5}
+    assert success(cfg, "wp", "open-door") is None
+    assert run_dir(cfg, "wp", "place-in", "partnet-mobility", executor="panda").name == \
+        "wp__place-in__val__partnet-mobility__camera__panda"

@@ -54,3 +54,8 @@ def choice_callback(
         return check_choice(kind, value, names)
 
     return _callback
+
+
+def split_names(text: str) -> list[str]:
+    """The names in a comma- or space-separated list ("wp,gf", "wp gf")."""
+    return [item for item in text.replace(",", " ").split() if item]

@@ -22,14 +22,19 @@ def paper_table(
                                                   "[default: the number of cores]."),
     ray: str = typer.Option(None, "--ray", metavar="ADDRESS", help="Run the missing runs on a Ray cluster instead: "
                                                                    "'local', 'auto' or HOST:PORT."),
+    executors: str = typer.Option("ideal", help="Executors whose missing val runs are run (comma-separated: ideal, "
+                                                "gripper, panda); the table shows every executor's runs it finds."),
 ) -> None:
     """Pose errors (train/val x free-floating/articulated) and simulated success of every learned policy."""
-    from wpbench.cli.choices import check_choice
+    from wpbench.cli.choices import check_choice, split_names
     from wpbench.evaluation.paper_table import PaperTableConfig, make_paper_table
 
-    from wpbench.names import OBS_MODES
+    from wpbench.names import EXECUTORS, OBS_MODES
 
     check_choice("observation mode", obs, OBS_MODES)
+    executor_names = tuple(split_names(executors))
+    for name in executor_names:
+        check_choice("executor", name, EXECUTORS)
     if not (data / "train").is_dir() or not (data / "val").is_dir():
         raise typer.BadParameter(f"{data} lacks train/ and val/; make them with `wpbench data generate --out {data}`")
     ensemble = {key: value for key, value in (("subsets", subsets), ("mirror_views", mirror_views)) if value is not None}
@@ -38,7 +43,8 @@ def paper_table(
 
     cfg = PaperTableConfig(data=data, samples_per_kind=samples, episodes=episodes, obs=obs, run_missing=run_missing,
                            results=out.parent, workers=workers if ray is not None else (workers or available_cores()),
-                           use_ray=ray is not None, ray_address=ray_address(ray), **ensemble)
+                           use_ray=ray is not None, ray_address=ray_address(ray), executors=executor_names,
+                           **ensemble)
     path = make_paper_table(cfg, out)
     typer.echo(path.read_text())
     typer.echo(f"written: {path}")

@@ -7,11 +7,7 @@ from pathlib import Path
 import typer
 
 from wpbench import names
-from wpbench.cli.choices import check_choice
-
-
-def _split(text: str) -> list[str]:
-    return [item for item in text.replace(",", " ").split() if item]
+from wpbench.cli.choices import check_choice, split_names
 
 
 def sweep(
@@ -37,16 +33,16 @@ def sweep(
     from wpbench.evaluation.sweep import run_sweep, sweep_configs
     from wpbench.policies.registry import available_policies
 
-    lists = {"policy": (_split(policies), available_policies()), "task": (_split(tasks), names.task_names()),
-             "executor": (_split(executors), names.EXECUTORS), "split": (_split(splits), names.RUN_SPLITS)}
+    lists = {"policy": (split_names(policies), available_policies()), "task": (split_names(tasks), names.task_names()),
+             "executor": (split_names(executors), names.EXECUTORS), "split": (split_names(splits), names.RUN_SPLITS)}
     for what, (given, valid) in lists.items():
         for item in given:
             check_choice(what, item, valid)
     check_choice("observation mode", obs, names.OBS_MODES)
-    for source in _split(assets):
+    for source in split_names(assets):
         if source != "procedural" and not Path(source).is_dir():
             raise typer.BadParameter(f"--assets must be 'procedural' or existing folders; {source!r} is neither")
-    configs = sweep_configs(lists["policy"][0], lists["task"][0], episodes, results, _split(assets),
+    configs = sweep_configs(lists["policy"][0], lists["task"][0], episodes, results, split_names(assets),
                             lists["split"][0], lists["executor"][0], obs, seed)
     count = workers if ray is not None else (workers or available_cores())
     summaries = execute(lambda: run_sweep(configs, results, workers=count, use_ray=ray is not None,

@@ -8,14 +8,17 @@ Four tables, one command (``wpbench paper-table``):
    error (deg), translation error (cm) and per-point error (cm).
 2. Val pose errors by furniture category, per kind.
 3. Simulated success rate (95% Wilson interval) of each policy on every task,
-   val split, built-in furniture: read from ``results/runs/<policy>__<task>__val__procedural__<obs>``
-   and, with ``run_missing``, run there first: every missing or short run in one sweep
+   val split, built-in furniture, one row per policy and executor: read from the runs'
+   folders (``RunConfig.default_out``: ``results/runs/<policy>__<task>__val__procedural__<obs>``,
+   plus ``__<executor>`` for another executor than ``ideal``) and, with ``run_missing``,
+   run there first for ``executors``: every missing or short run in one sweep
    (``wpbench.evaluation.sweep``), all their episodes on one pool (``workers`` local
    processes or a Ray cluster), each run resumable, the leaderboard rebuilt after.
-4. The same on the real PartNet-Mobility objects, where those runs exist
-   (``results/runs/<policy>__<task>__val__partnet-mobility__<obs>``, made by
-   ``scripts/reference_runs.sh``): how far policies trained on the built-in
-   furniture carry to furniture they never saw.
+   An executor other than ``ideal`` has rows only when it has runs.
+4. The same on the test split and on the real PartNet-Mobility objects, where those runs
+   exist (``...__test__procedural__<obs>``, scored once per release by an explicit sweep;
+   ``...__val__partnet-mobility__<obs>``, made by ``scripts/reference_runs.sh``: how far
+   policies trained on the built-in furniture carry to furniture they never saw).
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from pathlib import Path
 
 from wpbench.models.configs import DEFAULT_MIRROR_VIEWS, DEFAULT_SUBSETS
 
-from wpbench.names import ARTICULATED, BUILTIN_TASKS, FREE, WEIGHTED_POSE_VARIANTS
+from wpbench.names import ARTICULATED, BUILTIN_TASKS, EXECUTORS, FREE, WEIGHTED_POSE_VARIANTS
 
 POLICIES = ("gf", "tp", "oracle", *WEIGHTED_POSE_VARIANTS)
 TASKS = BUILTIN_TASKS
@@ -49,6 +52,7 @@ class PaperTableConfig:
     workers: int | None = 1  # local worker processes for the missing runs (None: one per core)
     use_ray: bool = False  # run the missing runs on a Ray cluster instead
     ray_address: str | None = None  # that cluster (None: a local one)
+    executors: tuple[str, ...] = ("ideal",)  # whose missing val runs ``run_missing`` runs; rows show every executor run
 
 
 def _policies_for(policy: str, cfg: PaperTableConfig) -> dict[str, object]:
@@ -102,8 +106,14 @@ def category_errors(cfg: PaperTableConfig, policy: str) -> dict[str, dict[str, d
     return out
 
 
-def run_dir(cfg: PaperTableConfig, policy: str, task: str, source: str = "procedural", split: str = "val") -> Path:
-    return Path(cfg.results) / "runs" / f"{policy}__{task}__{split}__{source}__{cfg.obs}"
+def run_dir(cfg: PaperTableConfig, policy: str, task: str, source: str = "procedural", split: str = "val",
+            executor: str = "ideal") -> Path:
+    """Where ``wpbench run`` puts that run by default (clean camera)."""
+    from wpbench.evaluation.runner import RunConfig
+
+    assets = "procedural" if source == "procedural" else source
+    return RunConfig(policy=policy, task=task, split=split, assets=assets, obs=cfg.obs,
+                     executor=executor).default_out(cfg.results)
 
 
 def _read_summary(directory: Path) -> dict | None:
@@ -113,15 +123,15 @@ def _read_summary(directory: Path) -> dict | None:
     return json.loads(summary_file.read_text()) if summary_file.is_file() else None
 
 
-def real_success(cfg: PaperTableConfig, policy: str, task: str) -> dict | None:
+def real_success(cfg: PaperTableConfig, policy: str, task: str, executor: str = "ideal") -> dict | None:
     """The run's summary on the real objects, or None (never run from here: it needs their folder)."""
-    return _read_summary(run_dir(cfg, policy, task, REAL_SOURCE))
+    return _read_summary(run_dir(cfg, policy, task, REAL_SOURCE, executor=executor))
 
 
-def test_success(cfg: PaperTableConfig, policy: str, task: str) -> dict | None:
+def test_success(cfg: PaperTableConfig, policy: str, task: str, executor: str = "ideal") -> dict | None:
     """The run's summary on the test split, or None. Never run from here: test is scored once
     per release of the weights, by an explicit sweep, after every choice is made (docs/design.md)."""
-    return _read_summary(run_dir(cfg, policy, task, split="test"))
+    return _read_summary(run_dir(cfg, policy, task, split="test", executor=executor))
 
 
 def camera_settings(summaries: list[dict]) -> str:
@@ -133,9 +143,9 @@ def camera_settings(summaries: list[dict]) -> str:
     return "a clean camera" if not named else "camera noise " + ", ".join(named) + (" and a clean camera" if "" in tags else "")
 
 
-def success(cfg: PaperTableConfig, policy: str, task: str) -> dict | None:
-    """The run's summary as it is on disk, or None when it was never run."""
-    return _read_summary(run_dir(cfg, policy, task))
+def success(cfg: PaperTableConfig, policy: str, task: str, executor: str = "ideal") -> dict | None:
+    """The val run's summary as it is on disk, or None when it was never run."""
+    return _read_summary(run_dir(cfg, policy, task, executor=executor))
 
 
 def missing_runs(cfg: PaperTableConfig, policies: tuple[str, ...] | list[str]):
@@ -145,11 +155,13 @@ def missing_runs(cfg: PaperTableConfig, policies: tuple[str, ...] | list[str]):
 
     configs = []
     for policy in policies:
-        for task in TASKS:
-            summary = success(cfg, policy, task)
-            if summary is None or summary.get("episodes", 0) < cfg.episodes:
-                (config,) = sweep_configs([policy], [task], cfg.episodes, cfg.results, obs=cfg.obs)
-                configs.append(config)
+        for executor in cfg.executors:
+            for task in TASKS:
+                summary = success(cfg, policy, task, executor)
+                if summary is None or summary.get("episodes", 0) < cfg.episodes:
+                    (config,) = sweep_configs([policy], [task], cfg.episodes, cfg.results, executors=[executor],
+                                              obs=cfg.obs)
+                    configs.append(config)
     return configs
 
 
@@ -168,25 +180,29 @@ def _fmt(value: float, scale: float = 1.0, digits: int = 1) -> str:
 
 
 def _success_table(cfg: PaperTableConfig, title: str, successes: dict) -> list[str]:
-    lines = ["", title, "", "| policy | " + " | ".join(TASKS) + " |", "|" + "---|" * (1 + len(TASKS))]
+    """``successes``: {(policy, executor, task): summary}. A row per policy and executor; the
+    ``ideal`` rows always, another executor's only when it has a run in this table."""
+    executors = [e for e in EXECUTORS if e == "ideal" or any(key[1] == e for key in successes)]
+    lines = ["", title, "", "| policy | executor | " + " | ".join(TASKS) + " |", "|" + "---|" * (2 + len(TASKS))]
     for policy in cfg.policies:
-        cells = []
-        for task in TASKS:
-            s = successes.get((policy, task))
-            if s is None:
-                cells.append("not run")
-            else:
-                lo, hi = s["success_ci95"]
-                cells.append(f"{100 * s['success_rate']:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}] (n={s['episodes']})")
-        lines.append(f"| {policy} | " + " | ".join(cells) + " |")
+        for executor in executors:
+            cells = []
+            for task in TASKS:
+                s = successes.get((policy, executor, task))
+                if s is None:
+                    cells.append("not run")
+                else:
+                    lo, hi = s["success_ci95"]
+                    cells.append(f"{100 * s['success_rate']:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}] (n={s['episodes']})")
+            lines.append(f"| {policy} | {executor} | " + " | ".join(cells) + " |")
     return lines
 
 
 def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: dict | None = None,
            real_successes: dict | None = None, test_successes: dict | None = None) -> str:
-    """``successes`` / ``real_successes`` / ``test_successes``: {(policy, task): summary} on the
-    built-in val furniture / the real objects / the built-in test furniture (those two sections
-    only when there is at least one such run)."""
+    """``successes`` / ``real_successes`` / ``test_successes``: {(policy, executor, task): summary}
+    on the built-in val furniture / the real objects / the built-in test furniture (those two
+    sections only when there is at least one such run)."""
     by_category = by_category or {}
     test_successes = test_successes or {}
     seen = [*successes.values(), *(real_successes or {}).values(), *test_successes.values()]
@@ -197,7 +213,9 @@ def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: di
              f"{', every second one mirrored,' if cfg.mirror_views and cfg.subsets > 1 else ''} "
              "fused into one pose as in the benchmark); "
              "success rates are simulated episodes on the val split (unseen built-in furniture), "
-             f"obs `{cfg.obs}`, with 95% Wilson intervals. The runs saw {camera_settings(seen)}; the shipped "
+             f"obs `{cfg.obs}`, with 95% Wilson intervals, one row per executor that carried out the "
+             "poses (`ideal`: the teleport protocol; `gripper`, `panda`: docs/executors.md). "
+             f"The runs saw {camera_settings(seen)}; the shipped "
              "weights were trained on camera clouds from a clean camera (no depth noise, holes or "
              "segmentation errors: `wpbench data generate`'s defaults).", "",
              "## Pose errors (rotation deg / translation cm / per-point cm)", ""]
@@ -245,16 +263,13 @@ def make_paper_table(cfg: PaperTableConfig, out: Path | None = None) -> Path:
     if cfg.run_missing:
         run_missing(cfg, [policy for policy in cfg.policies if policy in errors])
     for policy in errors:
-        for task in TASKS:
-            summary = success(cfg, policy, task)
-            if summary is not None:
-                successes[(policy, task)] = summary
-            test = test_success(cfg, policy, task)
-            if test is not None:
-                test_successes[(policy, task)] = test
-            real = real_success(cfg, policy, task)
-            if real is not None:
-                real_successes[(policy, task)] = real
+        for executor in EXECUTORS:
+            for task in TASKS:
+                for found, read in ((successes, success), (test_successes, test_success),
+                                    (real_successes, real_success)):
+                    summary = read(cfg, policy, task, executor)
+                    if summary is not None:
+                        found[(policy, executor, task)] = summary
     out = Path(out) if out is not None else Path(cfg.results) / "paper-table.md"
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(render(cfg, errors, successes, by_category, real_successes, test_successes))
