@@ -337,3 +337,96 @@ def test_real_gt_run_is_recorded(tmp_path):
     assert joint[0] == pytest.approx(record["stages"][0]["q_start"], abs=1e-4)
     assert joint[-1] == pytest.approx(record["stages"][0]["q_final"], abs=1e-4)
     assert "TextDocument:text" in got.components["episode/summary"]
+    assert not [e for e in got.components if e.startswith(("world/robot", "world/executor"))], \
+        "an ideal run has no robot to draw"
+
+
+# ---------------------------------------------------------------------- the robot's visual meshes
+def test_urdf_visuals_are_read_in_the_link_frame(tmp_path):
+    from wpbench.evaluation.recording_robot import urdf_link_name, urdf_visual_meshes
+
+    trimesh.creation.box((0.2, 0.1, 0.05)).export(tmp_path / "part.obj")
+    (tmp_path / "robot.urdf").write_text("""<robot name="r">
+  <material name="red"><color rgba="1 0 0 1"/></material>
+  <link name="base">
+    <visual><origin xyz="0 0 0.5" rpy="0 0 1.5707963267948966"/><geometry><mesh filename="part.obj"/></geometry>
+      <material name="red"/></visual>
+    <visual><origin xyz="1 0 0"/><geometry><box size="0.1 0.1 0.1"/></geometry></visual>
+  </link>
+  <link name="tool"/>
+  <link name="lost"><visual><geometry><mesh filename="missing.obj"/></geometry></visual></link>
+</robot>""")
+    meshes = urdf_visual_meshes(str(tmp_path / "robot.urdf"))
+    assert set(meshes) == {"base"}, "links without (readable) visuals are left to the collision shapes"
+    base = meshes["base"]
+    # The mesh turned a quarter turn about z and raised 0.5 m, and the box 1 m along x.
+    np.testing.assert_allclose(base.bounds, [[-0.05, -0.1, -0.05], [1.05, 0.1, 0.525]], atol=1e-6)
+    colors = np.unique(np.asarray(base.visual.vertex_colors), axis=0)
+    assert [255, 0, 0, 255] in colors.tolist(), "the URDF material colours the mesh"
+    assert urdf_link_name("scene-0-panda_panda_leftfinger_pad", ["panda_leftfinger", "panda_leftfinger_pad"]) \
+        == "panda_leftfinger_pad"
+    assert urdf_link_name("scene-0-gripper_panda_hand", ["panda_hand_tcp", "panda_hand"]) == "panda_hand"
+    assert urdf_link_name("scene-0-furniture_door", ["panda_hand"]) is None
+
+
+# ---------------------------------------------------------------------- real gripper and panda runs
+def _robot_run(tmp_path, executor: str):
+    pytest.importorskip("mani_skill")
+    from wpbench.evaluation.runner import RunConfig, run_benchmark
+
+    path = tmp_path / f"{executor}.rrd"
+    recorder = RerunRecorder(path, application=f"wpbench gt open-door {executor}")
+    try:
+        run_benchmark(RunConfig(policy="gt", task="open-door", episodes=1, obs="mesh", executor=executor,
+                                out=tmp_path / "run"), observer=recorder, progress=False)
+    finally:
+        recorder.close()
+    record = json.loads((tmp_path / "run" / "episodes.jsonl").read_text().splitlines()[0])
+    return read_recording(path), record["stages"][0]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("executor", ["gripper", "panda"])
+def test_robot_grasp_plan_and_motion_are_recorded(tmp_path, executor):
+    got, stage = _robot_run(tmp_path, executor)
+    assert stage["executor"] == executor and stage["grasp_point"] is not None
+
+    # The robot: meshes of its URDF visuals, poses on the time line while it works.
+    links = ["panda_hand", "panda_leftfinger", "panda_rightfinger"]
+    if executor == "panda":
+        links += [f"panda_link{i}" for i in range(8)]
+    for link in links:
+        assert "Mesh3D:vertex_positions" in got.components[f"world/robot/{link}"], link
+    hand = got.column("world/robot/panda_hand", "Transform3D:translation", "sim_step")
+    assert len({t for t, _ in hand}) > 1, "the hand has poses at more than one time"
+    positions = np.array([np.ravel(p) for _, p in hand])
+    assert np.ptp(positions, axis=0).max() > 0.05, "the hand moves"
+    assert np.abs(positions).max() < 3.0, "no pose of the parked robot is drawn"
+    scale = [(t, np.ravel(v)[0]) for t, v in got.column("world/robot", "Transform3D:scale", "sim_step")]
+    assert [s == 1.0 for _, s in scale] == [False, True, False], "parked, working, parked again"
+    assert scale[1][0] <= hand[0][0] and hand[-1][0] < scale[2][0]
+    if executor == "panda":
+        base = np.array([np.ravel(p) for _, p in got.column("world/robot/panda_link0", "Transform3D:translation",
+                                                              "sim_step")])
+        np.testing.assert_allclose(base, np.tile(stage["arm_base"], (len(base), 1)), atol=1e-3)
+        wrist = np.array([np.ravel(p) for _, p in got.column("world/robot/panda_link7", "Transform3D:translation",
+                                                               "sim_step")])
+        assert np.ptp(wrist, axis=0).max() > 0.05, "the arm's links move"
+
+    # The grasp, its approach and the planned path are the executor's, at the stage's start.
+    (t_grasp, grasp), = got.column("world/executor/grasp_point", "Points3D:positions", "sim_step")
+    np.testing.assert_allclose(np.ravel(grasp), stage["grasp_point"], atol=1e-5)
+    (_, origin), = got.column("world/executor/grasp_approach", "Arrows3D:origins", "sim_step")
+    (_, vector), = got.column("world/executor/grasp_approach", "Arrows3D:vectors", "sim_step")
+    np.testing.assert_allclose(np.ravel(origin) + np.ravel(vector), stage["grasp_point"], atol=1e-5)
+    np.testing.assert_allclose(np.ravel(vector) / np.linalg.norm(vector), stage["grasp_approach"], atol=1e-3)
+    (t_plan, planned), = got.column("world/executor/planned_path", "LineStrips3D:strips", "sim_step")
+    np.testing.assert_allclose(np.asarray(planned[0]), stage["planned_path"], atol=1e-5)
+    assert t_grasp == t_plan == scale[0][0], "logged when the stage began (open-door: when the episode did)"
+
+    # The executed TCP path: where the TCP went, through the grasp and along the plan.
+    (t_exec, executed), = got.column("world/executor/executed_path", "LineStrips3D:strips", "sim_step")
+    executed = np.asarray(executed[0])
+    assert t_exec >= hand[-1][0] and len(executed) == len(hand)
+    assert np.linalg.norm(executed - stage["grasp_point"], axis=1).min() < 0.02, "the TCP reached the grasp point"
+    assert np.linalg.norm(executed - stage["planned_path"][-1], axis=1).min() < 0.05, "... and the plan's end"

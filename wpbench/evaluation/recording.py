@@ -29,11 +29,26 @@ Entities (``<link>`` is the URDF link name):
     ``metrics/<kind>/<name>``  each stage's metrics (Scalars; success as 0/1);
     ``metrics/episode/<name>`` each episode's metrics (Scalars);
     ``sim/target_joint``, ``sim/object_height``  joint value and object height (Scalars);
+    ``world/robot/<link>``     ``gripper`` / ``panda`` runs: the floating hand's or the arm's
+                               links, each a Mesh3D of its URDF visuals in the link frame
+                               (once per run) + Transform3D (link -> world) every
+                               ``physics_stride`` physics steps while the robot works;
+    ``world/robot``            Transform3D scale: 1 while the robot works, ``HIDDEN_SCALE``
+                               while it waits at its parking place far from the scene
+                               (between stages), so it vanishes instead of pulling the view away;
+    ``world/executor/grasp_point``     Points3D: the stage's grasp (the TCP at contact);
+    ``world/executor/grasp_approach``  Arrows3D: the approach, ending at the grasp point;
+    ``world/executor/planned_path``    LineStrips3D: the TCP path the executor planned
+                               (the screw for a door or drawer, the carry waypoints for an object);
+    ``world/executor/executed_path``   LineStrips3D: the TCP positions the robot reached
+                               during the stage (sampled with the poses);
+                               the grasp and the plan are logged at the stage's start time,
+                               the executed path at its end; ``ideal`` runs have none of these;
     ``episode/summary``        TextDocument (markdown) of the last episode;
     ``log``                    TextLog, one line per stage and per episode.
 
-Cost: meshes are logged once per episode, later only poses (a handful of
-Transform3D every ``physics_stride`` steps), so recording adds little to a run.
+Cost: meshes are logged once per episode (the robot's once per run), later only poses
+(a handful of Transform3D every ``physics_stride`` steps), so recording adds little to a run.
 """
 
 from __future__ import annotations
@@ -47,11 +62,14 @@ from typing import Any
 
 import numpy as np
 
+from wpbench.evaluation.recording_robot import RobotView, robot_of
+
 # Stage metrics plotted as time series (the others in a stage result are strings,
 # matrices or executor details that the summary text shows instead).
 STAGE_SCALARS = ("rot_err_deg", "trans_err_m", "trans_err_raw_m", "point_err_m", "point_mse",
                  "open_distance", "q_final", "sim_seconds", "exec_seconds")
 EPISODE_SCALARS = ("rot_err_deg", "trans_err_m", "point_err_m")
+HIDDEN_SCALE = 1e-6   # the robot's scale while it is parked: too small to see, never singular
 
 RGB = tuple[int, int, int]
 
@@ -71,6 +89,11 @@ class RecorderConfig:
     target_link_color: RGB = (200, 160, 90)  # the door / drawer
     low_weight_color: RGB = (90, 90, 90)     # correspondence arrows blend from this (weight 0)
     high_weight_color: RGB = (250, 220, 30)  # ... to this (the largest weight)
+    grasp_color: RGB = (250, 200, 30)         # grasp point and approach
+    planned_path_color: RGB = (220, 40, 200)  # the executor's plan follows the prediction: magenta
+    executed_path_color: RGB = (30, 200, 220)  # cyan
+    path_radius: float = 0.002               # m, planned and executed TCP paths
+    approach_length: float = 0.1             # m, the approach arrow
 
     def __post_init__(self) -> None:
         if int(self.physics_stride) < 1:
@@ -107,6 +130,11 @@ class RerunRecorder:
         self._last_pose_step = -1
         self._poses = _PoseBuffer()
         self._link_paths: dict[str, str] = {}
+        self._robot: RobotView | None = None
+        self._robot_logged: str | None = None   # the robot kind whose meshes are in the recording
+        self._robot_shown: bool | None = None  # last logged state of ``world/robot``'s scale
+        self._tcp_track: list[np.ndarray] = []  # TCP positions sampled during the current stage
+        self._stage_start = 0                   # run-wide physics step at which the current stage began
         self._closed = False
 
     # ------------------------------------------------------------------ observer API
@@ -126,6 +154,7 @@ class RerunRecorder:
         self._log_furniture_meshes(env)
         self._log_object_mesh(env)
         self._log_in_region(env)
+        self._begin_robot(env)
         self._sample_poses(env)
         self._flush_poses()
         asset = env.asset
@@ -150,6 +179,10 @@ class RerunRecorder:
         action = _points(obs["action_points"], "obs['action_points']")
         anchor = _points(obs["anchor_points"], "obs['anchor_points']")
         self._stream.log("world/prediction", rr.Clear(recursive=True))
+        self._stage_start = self._step(env)
+        self._tcp_track = []
+        if self._robot is not None:
+            self._stream.log("world/executor", rr.Clear(recursive=True))
         self._stream.log("world/observation/action",
                          rr.Points3D(action, colors=cfg.action_color, radii=cfg.point_radius))
         self._stream.log("world/observation/anchor",
@@ -173,6 +206,7 @@ class RerunRecorder:
         self._set_time(env)
         self._sample_poses(env)
         self._flush_poses()
+        self._log_executor(env, result)
         kind = str(result.get("kind", env.stage_kind))
         self._stream.log(f"metrics/{kind}/success", rr.Scalars(float(bool(result.get("success")))))
         for name in STAGE_SCALARS:
@@ -248,8 +282,12 @@ class RerunRecorder:
             self._sample_poses(env)
 
     # ------------------------------------------------------------------ helpers
-    def _set_time(self, env) -> None:
-        step = self._step_offset + int(getattr(env, "physics_steps", 0))
+    def _step(self, env) -> int:
+        """The run-wide physics step the env is at."""
+        return self._step_offset + int(getattr(env, "physics_steps", 0))
+
+    def _set_time(self, env, step: int | None = None) -> None:
+        step = self._step(env) if step is None else step
         self._stream.set_time("episode", sequence=max(self._episode, 0))
         self._stream.set_time("sim_step", sequence=step)
         self._stream.set_time("sim_time", duration=step / self._sim_freq)
@@ -312,6 +350,69 @@ class RerunRecorder:
             pose = body.entity_pose
             self._poses.add_pose("world/object", step, pose)
             self._poses.add_scalar("sim/object_height", step, float(pose.p[2]))
+        self._sample_robot(step)
+
+    # ------------------------------------------------------------------ the robot (gripper, panda)
+    def _begin_robot(self, env) -> None:
+        """Find the env's robot; log its meshes the first time it appears in the run."""
+        if self._robot_logged is not None:
+            self._stream.log("world/executor", self._rr.Clear(recursive=True))
+        self._robot = robot_of(env)
+        self._robot_shown = None
+        self._tcp_track = []
+        if self._robot is None:
+            if self._robot_logged is not None:   # an earlier env had one: keep it out of sight
+                self._poses.add_scale("world/robot", self._step(env), HIDDEN_SCALE)
+            return
+        if self._robot_logged == self._robot.kind:
+            return
+        rr = self._rr
+        self._stream.log("world/robot", rr.Clear(recursive=True))
+        for name, mesh in zip(self._robot.names, self._robot.meshes):
+            if mesh is not None:
+                self._stream.log(f"world/robot/{name}", _colored_mesh3d(rr, mesh))
+        self._robot_logged = self._robot.kind
+
+    def _sample_robot(self, step: int) -> None:
+        """The robot's link poses and TCP while it works; only its vanishing while it is parked."""
+        robot = self._robot
+        if robot is None:
+            return
+        shown = not robot.parked()
+        if shown != self._robot_shown:
+            self._poses.add_scale("world/robot", step, 1.0 if shown else HIDDEN_SCALE)
+            self._robot_shown = shown
+        if not shown:
+            return
+        for name, link, mesh in zip(robot.names, robot.links, robot.meshes):
+            if mesh is not None:
+                self._poses.add_pose(f"world/robot/{name}", step, link.entity_pose)
+        self._tcp_track.append(np.asarray(robot.tcp(), dtype=np.float64)[:3, 3].copy())
+
+    def _log_executor(self, env, result: dict[str, Any]) -> None:
+        """The stage's grasp and planned TCP path (at the stage's start) and executed TCP path (now)."""
+        if self._robot is None:
+            return
+        rr, cfg = self._rr, self.config
+        grasp = _array(result.get("grasp_point"))
+        approach = _array(result.get("grasp_approach"))
+        planned = _array(result.get("planned_path"))
+        self._set_time(env, self._stage_start)
+        if grasp is not None and grasp.shape == (3,) and np.all(np.isfinite(grasp)):
+            self._stream.log("world/executor/grasp_point",
+                             rr.Points3D([grasp], colors=cfg.grasp_color, radii=2 * cfg.point_radius))
+            if approach is not None and approach.shape == (3,) and np.linalg.norm(approach) > 1e-9:
+                vector = cfg.approach_length * approach / np.linalg.norm(approach)
+                self._stream.log("world/executor/grasp_approach", rr.Arrows3D(
+                    origins=[grasp - vector], vectors=[vector], colors=cfg.grasp_color, radii=cfg.arrow_radius))
+        if planned is not None and planned.ndim == 2 and planned.shape[1] == 3 and len(planned) >= 2:
+            self._stream.log("world/executor/planned_path", rr.LineStrips3D(
+                [planned], colors=cfg.planned_path_color, radii=cfg.path_radius))
+        self._set_time(env)
+        executed = np.asarray(self._tcp_track) if len(self._tcp_track) >= 2 else _array(result.get("executed_path"))
+        if executed is not None and executed.ndim == 2 and executed.shape[1] == 3 and len(executed) >= 2:
+            self._stream.log("world/executor/executed_path", rr.LineStrips3D(
+                [executed], colors=cfg.executed_path_color, radii=cfg.path_radius))
 
     def _flush_poses(self) -> None:
         self._poses.send(self._rr, self._stream, episode=max(self._episode, 0), sim_freq=self._sim_freq)
@@ -356,6 +457,7 @@ class _PoseBuffer:
 
     def __init__(self) -> None:
         self._poses: dict[str, tuple[list[int], list, list]] = {}
+        self._scales: dict[str, tuple[list[int], list[float]]] = {}
         self._scalars: dict[str, tuple[list[int], list[float]]] = {}
 
     def add_pose(self, entity: str, step: int, pose) -> None:
@@ -363,6 +465,12 @@ class _PoseBuffer:
         steps.append(step)
         translations.append(np.asarray(pose.p, dtype=np.float32))
         quaternions.append(np.asarray(pose.q, dtype=np.float32))   # SAPIEN: w, x, y, z
+
+    def add_scale(self, entity: str, step: int, scale: float) -> None:
+        """A uniform Transform3D scale of ``entity`` from ``step`` on."""
+        steps, values = self._scales.setdefault(entity, ([], []))
+        steps.append(step)
+        values.append(float(scale))
 
     def add_scalar(self, entity: str, step: int, value: float) -> None:
         steps, values = self._scalars.setdefault(entity, ([], []))
@@ -380,9 +488,13 @@ class _PoseBuffer:
             wxyz = np.stack(quaternions)
             stream.send_columns(entity, indexes=times(steps), columns=rr.Transform3D.columns(
                 translation=np.stack(translations), quaternion=wxyz[:, [1, 2, 3, 0]]))
+        for entity, (steps, values) in self._scales.items():
+            stream.send_columns(entity, indexes=times(steps), columns=rr.Transform3D.columns(
+                scale=np.repeat(np.asarray(values, dtype=np.float32)[:, None], 3, axis=1)))
         for entity, (steps, values) in self._scalars.items():
             stream.send_columns(entity, indexes=times(steps), columns=rr.Scalars.columns(scalars=values))
         self._poses.clear()
+        self._scales.clear()
         self._scalars.clear()
 
 
@@ -442,6 +554,16 @@ def _mesh3d(rr, mesh, color: RGB):
         triangle_indices=np.asarray(mesh.faces, dtype=np.uint32),
         vertex_normals=np.asarray(mesh.vertex_normals, dtype=np.float32),
         albedo_factor=[c / 255.0 for c in color] + [1.0],
+    )
+
+
+def _colored_mesh3d(rr, mesh):
+    """A mesh with per-vertex colours (trimesh ColorVisuals) as Mesh3D."""
+    return rr.Mesh3D(
+        vertex_positions=np.asarray(mesh.vertices, dtype=np.float32),
+        triangle_indices=np.asarray(mesh.faces, dtype=np.uint32),
+        vertex_normals=np.asarray(mesh.vertex_normals, dtype=np.float32),
+        vertex_colors=np.asarray(mesh.visual.vertex_colors, dtype=np.uint8),
     )
 
 

@@ -228,7 +228,8 @@ def execute_articulated_gripper(scene: Scene, action_points: np.ndarray, cross_p
     grasp = choose(action_points, cross_pose)
     if grasp is None:   # the prediction moves nothing: the hand has nothing to do
         return _finish(run, _settle(scene), {"grasp_point": None})
-    extra = {"grasp_point": grasp.tcp[:3, 3].round(4).tolist(), "grasp_width": grasp.width}
+    extra = {"grasp_point": grasp.tcp[:3, 3].round(4).tolist(), "grasp_approach": grasp.approach.round(4).tolist(),
+             "grasp_width": grasp.width}
     path = interpolate(cross_pose, np.linspace(0, 1, 11)) @ grasp.tcp
     extra["planned_path"] = path[:, :3, 3].round(4).tolist()
     if _below_floor(path):
@@ -285,7 +286,8 @@ def execute_side_entry(scene: Scene, run: _Runner, object_points: np.ndarray, pl
     plan says so, hold it by the face that looks out of the cavity, carry it to the staging
     pose, slide it in, lower it, let go, back out the way it came, settle."""
     waypoints = plan.carry_waypoints()
-    extra = {"grasp_point": plan.pick[:3, 3].round(4).tolist(), "grasp_width": 0.0, "entry": "side",
+    extra = {"grasp_point": plan.pick[:3, 3].round(4).tolist(), "grasp_approach": plan.pick[:3, 2].round(4).tolist(),
+             "grasp_width": 0.0, "entry": "side",
              "regrasp_turn_deg": float(np.degrees(plan.regrasp_turn)),
              "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints]}
     if _below_floor(np.stack(waypoints)):
@@ -330,7 +332,8 @@ def execute_free_gripper(scene: Scene, object_points: np.ndarray, anchor_points:
     lifted[2, 3] = travel_z
     above_goal[2, 3] = travel_z
     waypoints = [start, lifted, above_goal, goal]
-    extra = {"grasp_point": start[:3, 3].round(4).tolist(), "grasp_width": grasp.width, "entry": "top",
+    extra = {"grasp_point": start[:3, 3].round(4).tolist(), "grasp_approach": grasp.approach.round(4).tolist(),
+             "grasp_width": grasp.width, "entry": "top",
              "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints]}
     if _below_floor(np.stack(waypoints)):
         return _unreachable(run, extra)

@@ -502,7 +502,8 @@ def execute_articulated_panda(scene: ArmScene, action_points: np.ndarray, anchor
     grasp = (suction_point if suction else articulated_grasp)(action_points, cross_pose)
     if grasp is None:   # the prediction moves nothing: the arm has nothing to do
         return _finish(None, _settle(scene), {"grasp_point": None})
-    extra = {"grasp_point": grasp.tcp[:3, 3].round(4).tolist(), "grasp_width": grasp.width}
+    extra = {"grasp_point": grasp.tcp[:3, 3].round(4).tolist(), "grasp_approach": grasp.approach.round(4).tolist(),
+             "grasp_width": grasp.width}
     path = interpolate(cross_pose, np.linspace(0, 1, 11)) @ grasp.tcp
     extra["planned_path"] = path[:, :3, 3].round(4).tolist()
     if _below_floor(path):
@@ -544,7 +545,8 @@ def _side_entry(scene: ArmScene, plan, object_points: np.ndarray, anchor_points:
     from wpbench.sim.side_entry import _turn_about_vertical, regrasp_centre
 
     waypoints = plan.carry_waypoints()
-    extra = {"grasp_point": plan.pick[:3, 3].round(4).tolist(), "grasp_width": 0.0, "entry": "side",
+    extra = {"grasp_point": plan.pick[:3, 3].round(4).tolist(), "grasp_approach": plan.pick[:3, 2].round(4).tolist(),
+             "grasp_width": 0.0, "entry": "side",
              "regrasp_turn_deg": float(np.degrees(plan.regrasp_turn)),
              "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints]}
     if _below_floor(np.stack(waypoints)):
@@ -591,7 +593,8 @@ def execute_free_panda(scene: ArmScene, object_points: np.ndarray, anchor_points
     lifted[2, 3] = travel_z
     above_goal[2, 3] = travel_z
     waypoints = [start, lifted, above_goal, goal]
-    extra = {"grasp_point": start[:3, 3].round(4).tolist(), "grasp_width": grasp.width, "entry": "top",
+    extra = {"grasp_point": start[:3, 3].round(4).tolist(), "grasp_approach": grasp.approach.round(4).tolist(),
+             "grasp_width": grasp.width, "entry": "top",
              "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints]}
     if _below_floor(np.stack(waypoints)):
         return _finish(None, ExecutionResult(ok=False, reason=UNREACHABLE, detail="the path goes under the floor"), extra)
