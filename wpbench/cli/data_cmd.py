@@ -43,16 +43,27 @@ def generate(
     assets: str = typer.Option("procedural", help="'procedural' (built-in furniture) or a folder of your own "
                                "PartNet-Mobility objects split with `wpbench assets split`."),
     progress: bool = typer.Option(True, help="Show a progress bar."),
-    workers: int = typer.Option(1, min=1, help="Processes drawing whole shards side by side; the shards are the "
-                                               "same whatever the number."),
+    workers: int = typer.Option(None, min=1, help="Processes drawing whole shards side by side [default: 1]; the "
+                                                  "shards are the same whatever the number."),
+    ray: str = typer.Option(
+        None, "--ray", metavar="ADDRESS",
+        help="Draw whole shards as tasks on a Ray cluster, one CPU each: 'local' starts one on this machine, "
+             "'auto' joins the one this machine belongs to, HOST:PORT another one. This process writes the "
+             "shards; the nodes need no shared file system."),
 ) -> None:
     """Sample (action cloud, anchor cloud, cross-pose) triples into OUT/<split>/ shards + manifest.json.
 
     Resumable: shards already on disk are skipped; rerun the same command after an interruption.
     """
+    from wpbench.cli.run_cmd import ray_address
     from wpbench.data.config import GenerationConfig
     from wpbench.data.generate import generate as run_generation
+    from wpbench.evaluation.local_workers import WorkerError
 
+    if workers is not None and ray is not None:
+        typer.echo("Error: --workers and --ray cannot be combined: shards are drawn either by local processes "
+                   "or by the Ray cluster's CPUs", err=True)
+        raise typer.Exit(2)
     check_choice("split", split, names.SPLITS)
     check_choice("observation mode", obs, names.OBS_MODES)
     camera_noise = camera_noise_settings(obs, depth_noise, depth_holes, edge_holes, seg_noise_px)
@@ -76,8 +87,9 @@ def generate(
             num_action_points=num_action_points, num_anchor_points=num_anchor_points,
             extra_train_instances=extra_train_instances, assets=assets, camera_noise=camera_noise,
         )
-        report = run_generation(out, config, progress=progress, workers=workers)
-    except (ValueError, FileNotFoundError) as err:
+        report = run_generation(out, config, progress=progress, workers=workers or 1, use_ray=ray is not None,
+                                ray_address=ray_address(ray))
+    except (ValueError, FileNotFoundError, WorkerError) as err:
         typer.echo(f"Error: {err}", err=True)
         raise typer.Exit(2)
     m = report.manifest

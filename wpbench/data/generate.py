@@ -146,31 +146,30 @@ def own_objects_config(config: GenerationConfig) -> GenerationConfig:
     return replace(config, assets=str(folder.resolve()))
 
 
-_WORKER_ENVS: dict[str, object] = {}   # one env per kind in each worker process, built on first use
+_WORKER_ENVS: dict[tuple[str, str], object] = {}   # (config fingerprint, kind) -> env, in each worker process
 
 
-def _draw_shard(config: GenerationConfig, directory: Path, kind: str, shard: int,
-                envs: dict[str, object], on_sample: Callable[[str, int], None] | None = None) -> int:
-    """Draw shard ``shard`` of ``kind`` with ``envs``' env (made when missing) and write it."""
-    if kind not in envs:
-        envs[kind] = make_env(config, kind)
+def draw_shard(config: GenerationConfig, kind: str, shard: int, envs: dict,
+               on_sample: Callable[[str, int], None] | None = None) -> dict[str, np.ndarray]:
+    """The arrays of shard ``shard`` of ``kind`` (``shards.stack_samples``), drawn with the
+    env in ``envs`` for this config and kind (made and kept there when missing)."""
+    key = (config.sample_fingerprint(), kind)
+    if key not in envs:
+        envs[key] = make_env(config, kind)
     samples = []
     for i in range(shard * config.shard_size, (shard + 1) * config.shard_size):
-        samples.append(draw_sample(envs[kind], config, kind, i))
+        samples.append(draw_sample(envs[key], config, kind, i))
         if on_sample is not None:
             on_sample(kind, i)
-    write_shard(shard_path(directory, kind, shard), stack_samples(samples, config.sample_fingerprint()))
-    return len(samples)
+    return stack_samples(samples, config.sample_fingerprint())
 
 
-def _draw_shard_in_worker(config: GenerationConfig, directory: Path, kind: str, shard: int) -> int:
-    return _draw_shard(config, directory, kind, shard, _WORKER_ENVS)
-
-
-def _one_thread_per_worker() -> None:
+def draw_shard_in_worker(config: GenerationConfig, kind: str, shard: int) -> dict[str, np.ndarray]:
+    """:func:`draw_shard` in a worker process: torch on one thread, the envs kept for the next shard."""
     import torch
 
     torch.set_num_threads(1)
+    return draw_shard(config, kind, shard, _WORKER_ENVS)
 
 
 def generate(
@@ -179,16 +178,26 @@ def generate(
     progress: bool = True,
     on_sample: Callable[[str, int], None] | None = None,
     workers: int = 1,
+    use_ray: bool = False,
+    ray_address: str | None = None,
+    ray_cpus: int | None = None,
+    on_shard: Callable[[str, int], None] | None = None,
 ) -> GenerationReport:
     """Write the shards of ``config`` under ``root/<split>/`` that do not exist yet, then the manifest.
 
-    ``workers`` > 1 draws whole shards in that many processes. A shard starts with a fresh
-    scene and depends only on its index, so the shards are the same whatever the number.
+    ``workers`` > 1 draws whole shards in that many processes; ``use_ray`` draws them as
+    tasks on the Ray cluster at ``ray_address`` (``wpbench.data.ray_generation``; None: a
+    local cluster with ``ray_cpus`` CPUs). Either way this process writes every shard and
+    keeps the manifest current as they land (``on_shard(kind, shard)`` is called after each).
+    A shard starts with a fresh scene and depends only on its index, so the shards are the
+    same however they are drawn.
     """
     from tqdm import tqdm
 
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
+    if use_ray and workers != 1:
+        raise ValueError("draw shards either in local worker processes or on Ray, not both")
     config = own_objects_config(config)
     directory = split_dir(root, config.split)
     todo = [(kind, i) for kind in config.kinds for i in range(config.shards_per_kind())
@@ -207,28 +216,42 @@ def generate(
         write_manifest(directory, build_manifest(directory, config, {"in_progress": True}))
         bar.set_postfix(samples_per_s=f"{new_samples / max(elapsed, 1e-9):.2f}")
 
-    envs: dict[str, object] = {}
+    def shard_drawn(kind: str, shard: int, arrays: dict[str, np.ndarray]) -> None:
+        write_shard(shard_path(directory, kind, shard), arrays)
+        shard_written(len(arrays["seed"]))
+        if on_shard is not None:
+            on_shard(kind, shard)
+
+    envs: dict = {}
     try:
-        if workers == 1 or len(todo) <= 1:
+        if use_ray:
+            from wpbench.data.ray_generation import draw_shards_on_ray
+
+            for kind, shard, arrays in draw_shards_on_ray(config, todo, ray_address, ray_cpus, progress=progress):
+                bar.update(len(arrays["seed"]))
+                shard_drawn(kind, shard, arrays)
+        elif workers == 1 or len(todo) <= 1:
             def counted(kind: str, index: int) -> None:
                 bar.update(1)
                 if on_sample is not None:
                     on_sample(kind, index)
 
             for kind, shard in todo:
-                shard_written(_draw_shard(config, directory, kind, shard, envs, counted))
+                shard_drawn(kind, shard, draw_shard(config, kind, shard, envs, counted))
         else:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
+            from wpbench.assets.prepare import prepare_asset_sources
+
+            prepare_asset_sources([config.assets], progress=progress)   # once here, not in every worker
             context = multiprocessing.get_context("spawn")   # SAPIEN and torch do not survive fork
-            with ProcessPoolExecutor(min(workers, len(todo)), mp_context=context,
-                                     initializer=_one_thread_per_worker) as pool:
-                futures = [pool.submit(_draw_shard_in_worker, config, directory, kind, shard) for kind, shard in todo]
+            with ProcessPoolExecutor(min(workers, len(todo)), mp_context=context) as pool:
+                futures = {pool.submit(draw_shard_in_worker, config, kind, shard): (kind, shard) for kind, shard in todo}
                 for future in as_completed(futures):
-                    count = future.result()
-                    bar.update(count)
-                    shard_written(count)
+                    arrays = future.result()
+                    bar.update(len(arrays["seed"]))
+                    shard_drawn(*futures[future], arrays)
     finally:
         bar.close()
         for env in envs.values():

@@ -12,6 +12,8 @@ lacks, all links at once on the driver's cores, ``wpbench.assets.prepare``), and
 cache entries travel the same way: each node copies them into its own collision cache
 before its first episode, so no node decomposes again. (The built-in furniture is
 generated on each node from the package: same code, same seed, same furniture.)
+``wpbench data generate --ray`` ships an asset folder the same way
+(``wpbench.data.ray_generation``).
 
 An actor that dies takes its episode with it: that episode goes to a new actor once,
 and is recorded as a failure with the reason if it dies again. Each record's
@@ -33,8 +35,8 @@ from typing import Any, Iterable, Iterator, Sequence
 
 from wpbench.evaluation.local_workers import POLL_S, RETRIES, WorkerError, set_thread_count
 
-__all__ = ["RayPool", "pack_folder", "pack_files", "unpack_folder", "collision_cache_files",
-           "install_collision_cache", "ray_available"]
+__all__ = ["RayPool", "connect", "pack_folder", "pack_files", "unpack_folder", "collision_cache_files",
+           "install_collision_cache", "ship_folder", "ship_asset_folder", "receive_shipped", "ray_available"]
 
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
 SINGLE_MACHINE_VARIABLE = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
@@ -45,6 +47,28 @@ def ray_available() -> bool:
     import importlib.util
 
     return importlib.util.find_spec("ray") is not None
+
+
+def connect(address: str | None = None, num_cpus: int | None = None) -> bool:
+    """Connect this process to the Ray cluster at ``address`` ("auto": the running one;
+    None: start a local one with ``num_cpus`` CPUs, on 127.0.0.1), unless it already is;
+    True when this call connected (the caller then shuts Ray down when done)."""
+    host = (address or "127.0.0.1").rsplit(":", 1)[0]
+    if host in LOOPBACK_HOSTS:
+        # Ray turns a loopback address into this machine's network address before
+        # connecting, unless told the cluster is this machine alone (read when ray is
+        # first imported): a cluster on 127.0.0.1 stays on 127.0.0.1.
+        os.environ.setdefault(SINGLE_MACHINE_VARIABLE, "0")
+    import ray
+
+    if ray.is_initialized():
+        return False
+    options = dict(include_dashboard=False, log_to_driver=False, configure_logging=False)
+    if address is None:
+        ray.init(num_cpus=num_cpus, _node_ip_address="127.0.0.1", **options)
+    else:
+        ray.init(address=address, **options)
+    return True
 
 
 def pack_files(files: Iterable[tuple[str, Path]]) -> tuple[str, bytes]:
@@ -140,31 +164,57 @@ def install_collision_cache(unpacked: Path) -> list[Path]:
     return copied
 
 
+def ship_folder(what: str, folder: Path, packed: dict, put, progress: bool = False) -> tuple[str, str, Any, str]:
+    """``(what, digest, object reference, folder name in the archive)`` of ``folder`` put in
+    Ray's object store with ``put``: "weights_root" and "assets" the folder itself,
+    "collision_cache" its collision cache entries (:func:`collision_cache_files`, so the
+    folder is decomposed here first). ``packed`` holds what was already put there."""
+    name = folder.name if what == "assets" else ""
+    key = (what, str(folder))
+    if key not in packed:
+        if what == "collision_cache":
+            digest, data = pack_files(collision_cache_files(folder, progress=progress))
+        else:
+            digest, data = pack_folder(folder, prefix=name)
+        packed[key] = (digest, put(data))
+    return (what, *packed[key], name)
+
+
+def ship_asset_folder(assets: str, packed: dict, put, progress: bool = False) -> list[tuple[str, str, Any, str]]:
+    """What a node needs of the asset source ``assets`` (nothing for "procedural"): the
+    folder and its collision cache, as :func:`ship_folder` entries."""
+    if assets == "procedural":
+        return []
+    folder = Path(assets).expanduser().resolve()
+    return [ship_folder(what, folder, packed, put, progress) for what in ("assets", "collision_cache")]
+
+
+def receive_shipped(shipped: list[tuple[str, str, Any, str]]) -> dict[str, str]:
+    """On a node: unpack what :func:`ship_folder` put in the object store (once per node)
+    and install collision cache entries; ``{what: local folder}``."""
+    import ray
+
+    local = {}
+    for what, digest, reference, name in shipped:
+        unpacked = unpack_folder(digest, ray.get(reference))
+        if what == "collision_cache":
+            install_collision_cache(unpacked)
+        local[what] = str(unpacked / name)
+    return local
+
+
 def _shipped(cfg, packed: dict, put, progress: bool = False) -> list[tuple[str, str, Any, str]]:
-    """What of run ``cfg`` lives outside the package, as ``(what, digest, object reference,
-    folder name in the archive)``: its weights root, its asset folder and that folder's
-    collision cache. ``packed`` holds what earlier runs already put in the object store."""
+    """What of run ``cfg`` lives outside the package: its weights root, its asset folder
+    and that folder's collision cache (:func:`ship_folder` entries)."""
     from wpbench import names
 
-    items = []
+    shipped = []
     if cfg.policy in names.WEIGHTED_POLICIES:
         from wpbench.weights import weights_root_or_shipped
 
-        items.append(("weights_root", Path(weights_root_or_shipped(cfg.policy_kwargs.get("weights_root"))), ""))
-    if cfg.assets != "procedural":
-        folder = Path(cfg.assets).expanduser().resolve()
-        items += [("assets", folder, folder.name), ("collision_cache", folder, "")]
-    shipped = []
-    for what, folder, name in items:
-        key = (what, str(folder))
-        if key not in packed:
-            if what == "collision_cache":
-                digest, data = pack_files(collision_cache_files(folder, progress=progress))
-            else:
-                digest, data = pack_folder(folder, prefix=name)
-            packed[key] = (digest, put(data))
-        shipped.append((what, *packed[key], name))
-    return shipped
+        root = Path(weights_root_or_shipped(cfg.policy_kwargs.get("weights_root")))
+        shipped.append(ship_folder("weights_root", root, packed, put, progress))
+    return shipped + ship_asset_folder(cfg.assets, packed, put, progress)
 
 
 class EpisodeActor:
@@ -183,12 +233,7 @@ class EpisodeActor:
             if self.session is not None:
                 self.session.close()
             self.session, self.current = None, None
-            local = {}
-            for what, digest, reference, name in shipped:
-                unpacked = unpack_folder(digest, ray.get(reference))
-                if what == "collision_cache":
-                    install_collision_cache(unpacked)
-                local[what] = str(unpacked / name)
+            local = receive_shipped(shipped)
             if "weights_root" in local:
                 cfg = dataclasses.replace(cfg, policy_kwargs={**cfg.policy_kwargs, "weights_root": local["weights_root"]})
             if "assets" in local:
@@ -219,22 +264,7 @@ class RayPool:
         self.started = 0
 
     def _connect(self) -> None:
-        host = (self.address or "127.0.0.1").rsplit(":", 1)[0]
-        if host in LOOPBACK_HOSTS:
-            # Ray turns a loopback address into this machine's network address before
-            # connecting, unless told the cluster is this machine alone (read when ray is
-            # first imported): a cluster on 127.0.0.1 stays on 127.0.0.1.
-            os.environ.setdefault(SINGLE_MACHINE_VARIABLE, "0")
-        import ray
-
-        if ray.is_initialized():
-            return
-        options = dict(include_dashboard=False, log_to_driver=False, configure_logging=False)
-        if self.address is None:
-            ray.init(num_cpus=self.num_cpus, _node_ip_address="127.0.0.1", **options)
-        else:
-            ray.init(address=self.address, **options)
-        self._started_ray = True
+        self._started_ray = connect(self.address, self.num_cpus) or self._started_ray
 
     def _new_actor(self):
         import ray
