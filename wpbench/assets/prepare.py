@@ -6,13 +6,15 @@ of a run, find each object's pieces ready. The links of every object go into one
 queue of worker processes (``wpbench.assets.decompose``): a big body and a small knob
 of different objects run side by side, and a link whose decomposition crashes costs
 only itself. Objects the text files already refuse (no door, missing files) are
-never decomposed.
+never decomposed. Runs and data generation on local worker processes call
+:func:`prepare_asset_sources` before their first worker starts.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterable
 
 from wpbench.assets.collision import CollisionBuildError, DerivedCollision, finish_collision, plan_collision
 from wpbench.assets.decompose import CoacdConfig, read_entry, run_jobs
@@ -80,6 +82,15 @@ def prepare_folder(root: Path, workers: int | None = None, cache_dir: Path | Non
             continue
         result.seconds = sum(float(read_entry(entry)["seconds"]) for entry in plan.entries.values())
     return results
+
+
+def prepare_asset_sources(sources: Iterable[str], progress: bool = False) -> None:
+    """:func:`prepare_folder` for every distinct folder among the asset sources ``sources``
+    ("procedural" needs nothing): what worker processes about to load these objects would
+    otherwise each decompose, done once here."""
+    folders = {Path(source).expanduser().resolve() for source in sources if source != "procedural"}
+    for folder in sorted(folders):
+        prepare_folder(folder, progress=progress)
 
 
 def _one_line(message: str, object_id: str) -> str:

@@ -12,6 +12,11 @@ are finished and kept, and the workers are stopped.
 
 Torch runs ``threads_per_worker(N)`` threads in each worker, so N workers keep the
 cores busy without oversubscribing them.
+
+Before the first worker starts, the driver decomposes what the collision cache lacks of
+every PartNet-Mobility folder the runs use (``wpbench.assets.prepare.prepare_asset_sources``,
+all links at once on every core), so the workers find each object's pieces ready
+instead of decomposing the same object side by side.
 """
 
 from __future__ import annotations
@@ -133,8 +138,14 @@ class LocalWorkerPool:
         return worker
 
     def run(self, jobs: Sequence[Any], stop) -> Iterator[tuple[Any, dict[str, Any]]]:
+        import sys
         from multiprocessing.connection import wait
 
+        from wpbench.assets.prepare import prepare_asset_sources
+
+        if not jobs:
+            return
+        prepare_asset_sources([job.cfg.assets for job in jobs], progress=sys.stderr.isatty())
         pending = deque(range(len(jobs)))
         attempts = [0] * len(jobs)
         self._idle_deaths = 0
