@@ -1,7 +1,9 @@
 """``wpbench data generate --ray``: whole shards drawn as Ray tasks, written by the driver,
 the same shards as a serial run; ``--workers`` with ``--ray`` is refused.
 
-The cluster here is a local one on 127.0.0.1 with 2 CPUs.
+The cluster here is a local one on 127.0.0.1 with 2 CPUs. One's own objects reach the
+tasks through Ray's object store with their split file, even one kept in the driver's
+cache: had a task loaded every object of the folder, its shards would hold other objects.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import sys
 import numpy as np
 import pytest
 
+from test_assets_decompose import decomposers  # noqa: F401  (fixture)
 from wpbench.data.config import ARTICULATED, FREE, GenerationConfig
 from wpbench.data.generate import generate
 from wpbench.data.manifest import read_manifest
@@ -58,3 +61,40 @@ def test_a_local_ray_cluster_with_two_cpus_writes_the_serial_shards(tmp_path):
     assert read_manifest(tmp_path / "ray" / "train")["counts"] == {ARTICULATED: 4, FREE: 4}
     assert read_manifest(tmp_path / "ray" / "train")["content_hash"] == serial.manifest["content_hash"]
     assert not np.isnan(read_shard(shard_path(tmp_path / "ray" / "train", ARTICULATED, 0))["start_fraction"]).any()
+
+
+def assert_same_shards(one_root, two_root, split: str, kinds, shards: int) -> None:
+    for kind in kinds:
+        for index in range(shards):
+            one = read_shard(shard_path(one_root / split, kind, index))
+            two = read_shard(shard_path(two_root / split, kind, index))
+            assert set(one) == set(two)
+            for key in one:
+                assert one[key].tobytes() == two[key].tobytes(), (kind, index, key)
+
+
+@pytest.mark.slow
+def test_own_objects_reach_the_tasks_with_a_split_file_kept_in_the_cache(tmp_path, decomposers, monkeypatch):  # noqa: F811
+    from wpbench.assets.object_split import SPLIT_FILE_NAME, find_split_file, split_of_objects, write_split_file
+    from wpbench.assets.prepare import prepare_folder
+    from wpbench.assets.procedural import generate_object
+
+    monkeypatch.setenv("WPBENCH_CACHE", str(tmp_path / "cache"))
+    objects = tmp_path / "objects"
+    for index in range(4):
+        generate_object("microwave", index, objects)
+    prepared = prepare_folder(objects, workers=2, progress=False, decomposer=f"{decomposers}:exact")
+    assert all(r.error is None for r in prepared)
+    (objects / SPLIT_FILE_NAME).mkdir()  # the folder cannot take the split file: it goes to the cache
+    write_split_file(objects, val_fraction=0.25, test_fraction=0.25, seed=0)
+    assert find_split_file(objects).is_relative_to(tmp_path / "cache")
+    train = {i for i, s in split_of_objects(objects).items() if s == "train"}
+    assert len(train) == 2
+    config = GenerationConfig(split="train", obs="mesh", seed=1, samples_per_kind=4, shard_size=2, scene_reuse=1,
+                              kinds=(ARTICULATED,), num_action_points=32, num_anchor_points=64, assets=str(objects))
+    generate(tmp_path / "serial", config, progress=False)
+    generate(tmp_path / "ray", config, progress=False, use_ray=True, ray_cpus=2)
+    assert_same_shards(tmp_path / "serial", tmp_path / "ray", "train", (ARTICULATED,), 2)
+    drawn = set(read_shard(shard_path(tmp_path / "ray" / "train", ARTICULATED, 0))["object_id"])
+    drawn |= set(read_shard(shard_path(tmp_path / "ray" / "train", ARTICULATED, 1))["object_id"])
+    assert drawn <= train

@@ -35,7 +35,7 @@ from typing import Any, Iterable, Iterator, Sequence
 
 from wpbench.evaluation.local_workers import POLL_S, RETRIES, WorkerError, set_thread_count
 
-__all__ = ["RayPool", "connect", "pack_folder", "pack_files", "unpack_folder", "collision_cache_files",
+__all__ = ["RayPool", "connect", "folder_files", "pack_folder", "pack_files", "asset_folder_files", "unpack_folder", "collision_cache_files",
            "install_collision_cache", "ship_folder", "ship_asset_folder", "receive_shipped", "ray_available"]
 
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
@@ -85,9 +85,9 @@ def pack_files(files: Iterable[tuple[str, Path]]) -> tuple[str, bytes]:
     return hashlib.sha256(data).hexdigest(), data
 
 
-def pack_folder(folder: str | os.PathLike[str], prefix: str = "") -> tuple[str, bytes]:
-    """:func:`pack_files` of every file under ``folder`` (hidden entries left out), named by
-    their path in it, under ``prefix/`` when given."""
+def folder_files(folder: str | os.PathLike[str], prefix: str = "") -> list[tuple[str, Path]]:
+    """Every file under ``folder`` (hidden entries left out) as ``(path in the folder, under
+    ``prefix/`` when given, file)`` pairs, for :func:`pack_files`."""
     root = Path(folder)
     files = []
     for path in root.rglob("*"):
@@ -95,7 +95,27 @@ def pack_folder(folder: str | os.PathLike[str], prefix: str = "") -> tuple[str, 
         if any(part.startswith(".") for part in relative.parts) or not path.is_file():
             continue
         files.append(((Path(prefix) / relative).as_posix() if prefix else relative.as_posix(), path))
-    return pack_files(files)
+    return files
+
+
+def pack_folder(folder: str | os.PathLike[str], prefix: str = "") -> tuple[str, bytes]:
+    """:func:`pack_files` of :func:`folder_files`."""
+    return pack_files(folder_files(folder, prefix))
+
+
+def asset_folder_files(folder: Path) -> list[tuple[str, Path]]:
+    """:func:`folder_files` of an asset folder under its own name, with its split file in it
+    even when that file lives in this machine's cache (a folder one cannot write into), so
+    a node loads the split's objects as the driver would."""
+    from wpbench.assets.object_split import SPLIT_FILE_NAME, find_split_file
+
+    in_folder = f"{folder.name}/{SPLIT_FILE_NAME}"
+    files = folder_files(folder, prefix=folder.name)
+    split = find_split_file(folder)
+    if split is not None and split.parent != folder:
+        files = [(name, path) for name, path in files if not (name == in_folder or name.startswith(in_folder + "/"))]
+        files.append((in_folder, split))
+    return files
 
 
 def unpack_folder(digest: str, data: bytes, root: Path | None = None) -> Path:
@@ -166,16 +186,19 @@ def install_collision_cache(unpacked: Path) -> list[Path]:
 
 def ship_folder(what: str, folder: Path, packed: dict, put, progress: bool = False) -> tuple[str, str, Any, str]:
     """``(what, digest, object reference, folder name in the archive)`` of ``folder`` put in
-    Ray's object store with ``put``: "weights_root" and "assets" the folder itself,
-    "collision_cache" its collision cache entries (:func:`collision_cache_files`, so the
-    folder is decomposed here first). ``packed`` holds what was already put there."""
+    Ray's object store with ``put``: "weights_root" the folder itself, "assets" the folder
+    with its split file (:func:`asset_folder_files`), "collision_cache" its collision cache
+    entries (:func:`collision_cache_files`, so the folder is decomposed here first).
+    ``packed`` holds what was already put there."""
     name = folder.name if what == "assets" else ""
     key = (what, str(folder))
     if key not in packed:
         if what == "collision_cache":
             digest, data = pack_files(collision_cache_files(folder, progress=progress))
+        elif what == "assets":
+            digest, data = pack_files(asset_folder_files(folder))
         else:
-            digest, data = pack_folder(folder, prefix=name)
+            digest, data = pack_folder(folder)
         packed[key] = (digest, put(data))
     return (what, *packed[key], name)
 
