@@ -27,6 +27,21 @@ os.environ.setdefault(SINGLE_MACHINE_VARIABLE, "0")
 ray = pytest.importorskip("ray")
 
 
+def assert_same_shards(one_root, two_root, split: str, kinds, shards: int) -> None:
+    """The shards of two data roots hold the same arrays, bit for bit, in the same files."""
+    for kind in kinds:
+        for index in range(shards):
+            one = read_shard(shard_path(one_root / split, kind, index))
+            two = read_shard(shard_path(two_root / split, kind, index))
+            assert set(one) == set(two)
+            for key in one:
+                assert one[key].dtype == two[key].dtype and one[key].shape == two[key].shape, (kind, index, key)
+                assert one[key].tobytes() == two[key].tobytes(), (kind, index, key)
+            # and the files: numpy's zip entries carry no write time
+            assert shard_path(one_root / split, kind, index).read_bytes() == \
+                shard_path(two_root / split, kind, index).read_bytes()
+
+
 def test_workers_and_ray_together_are_refused_in_one_line(tmp_path):
     done = subprocess.run([sys.executable, "-c", "from wpbench.cli import main; main()", "data", "generate",
                            "--workers", "2", "--ray", "local", "--out", str(tmp_path / "data")],
@@ -47,30 +62,13 @@ def test_a_local_ray_cluster_with_two_cpus_writes_the_serial_shards(tmp_path):
                           (kind, shard, read_manifest(tmp_path / "ray" / "train")["counts"])))
     assert not ray.is_initialized()  # the cluster it started is shut down
     assert serial.written_shards == on_ray.written_shards == 4 and on_ray.new_samples == 8
-    for kind in (ARTICULATED, FREE):
-        for index in range(2):
-            one = read_shard(shard_path(tmp_path / "serial" / "train", kind, index))
-            two = read_shard(shard_path(tmp_path / "ray" / "train", kind, index))
-            assert set(one) == set(two)
-            for key in one:
-                assert one[key].dtype == two[key].dtype and one[key].shape == two[key].shape, key
-                assert one[key].tobytes() == two[key].tobytes(), key
+    assert_same_shards(tmp_path / "serial", tmp_path / "ray", "train", (ARTICULATED, FREE), 2)
     # The manifest was current after every shard the driver wrote, and is complete at the end.
     assert sorted((kind, shard) for kind, shard, _ in landed) == [(k, i) for k in (ARTICULATED, FREE) for i in (0, 1)]
     assert [sum(counts.values()) for _, _, counts in landed] == [2, 4, 6, 8]
     assert read_manifest(tmp_path / "ray" / "train")["counts"] == {ARTICULATED: 4, FREE: 4}
     assert read_manifest(tmp_path / "ray" / "train")["content_hash"] == serial.manifest["content_hash"]
     assert not np.isnan(read_shard(shard_path(tmp_path / "ray" / "train", ARTICULATED, 0))["start_fraction"]).any()
-
-
-def assert_same_shards(one_root, two_root, split: str, kinds, shards: int) -> None:
-    for kind in kinds:
-        for index in range(shards):
-            one = read_shard(shard_path(one_root / split, kind, index))
-            two = read_shard(shard_path(two_root / split, kind, index))
-            assert set(one) == set(two)
-            for key in one:
-                assert one[key].tobytes() == two[key].tobytes(), (kind, index, key)
 
 
 @pytest.mark.slow
