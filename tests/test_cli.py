@@ -362,3 +362,17 @@ def test_run_no_mirror_views_reaches_the_learned_policy_and_is_refused_for_the_o
     refused = runner.invoke(cli.app, ["run", "--policy", "identity", "--mirror-views"])
     assert refused.exit_code == 2 and "mirror-views applies to the trained policies" in refused.output
     assert len(captured_runs) == 1
+
+
+def test_a_bare_ray_means_a_local_cluster():
+    assert cli.bare_ray_means_local(["sweep", "--ray"]) == ["sweep", "--ray", "local"]
+    assert cli.bare_ray_means_local(["run", "--ray", "--workers", "2"]) == ["run", "--ray", "local", "--workers", "2"]
+    assert cli.bare_ray_means_local(["run", "--ray", "auto"]) == ["run", "--ray", "auto"]
+    assert cli.bare_ray_means_local(["run", "--ray=auto"]) == ["run", "--ray=auto"]
+
+
+def test_a_bare_ray_is_accepted_by_the_console_script(wpbench_exe):
+    # The policy check comes after parsing: reaching it shows `--ray` alone parsed.
+    result = run_wpbench(wpbench_exe, "sweep", "--policies", "no-such-policy", "--ray", "--episodes", "1")
+    assert result.returncode != 0
+    assert "requires an argument" not in result.stderr and "no-such-policy" in result.stderr, result.stderr

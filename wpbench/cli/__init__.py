@@ -178,6 +178,20 @@ def _root() -> None:
     pass
 
 
+def bare_ray_means_local(argv: list[str]) -> list[str]:
+    """``--ray`` given without an address (last, or followed by another option) means a local
+    cluster: ``--ray local``. Typer has no option whose value may be left out, so the command
+    line is completed before it is parsed."""
+    completed = []
+    for i, arg in enumerate(argv):
+        completed.append(arg)
+        if arg == "--ray" and (i + 1 == len(argv) or argv[i + 1].startswith("-")):
+            completed.append("local")
+    return completed
+
+
 def main() -> None:
     """Console-script entry point (``wpbench = "wpbench.cli:main"``)."""
-    app()
+    import sys
+
+    app(args=bare_ray_means_local(sys.argv[1:]))

@@ -47,8 +47,8 @@ def generate(
                                                   "shards are the same whatever the number."),
     ray: str = typer.Option(
         None, "--ray", metavar="ADDRESS",
-        help="Draw whole shards as tasks on a Ray cluster, one CPU each: 'local' starts one on this machine, "
-             "'auto' joins the one this machine belongs to, HOST:PORT another one. This process writes the "
+        help="Draw whole shards as tasks on a Ray cluster, one CPU each: 'local' (or --ray alone) starts one "
+             "on this machine, 'auto' joins the one this machine belongs to, HOST:PORT another one. This process writes the "
              "shards; the nodes need no shared file system."),
 ) -> None:
     """Sample (action cloud, anchor cloud, cross-pose) triples into OUT/<split>/ shards + manifest.json.

@@ -21,7 +21,7 @@ def paper_table(
     workers: int = typer.Option(None, min=1, help="Worker processes for the missing runs, all run as one sweep "
                                                   "[default: the number of cores]."),
     ray: str = typer.Option(None, "--ray", metavar="ADDRESS", help="Run the missing runs on a Ray cluster instead: "
-                                                                   "'local', 'auto' or HOST:PORT."),
+                                                                   "'local' (or --ray alone), 'auto' or HOST:PORT."),
     executors: str = typer.Option("ideal", help="Executors whose missing val runs are run (comma-separated: ideal, "
                                                 "gripper, panda); the table shows every executor's runs it finds."),
 ) -> None:

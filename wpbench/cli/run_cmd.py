@@ -46,8 +46,8 @@ def run(
                           "1 with --record]. The records are the same whatever the number."),
     ray: str = typer.Option(
         None, "--ray", metavar="ADDRESS",
-        help="Run the episodes on a Ray cluster: 'local' starts one on this machine, 'auto' joins the one this "
-             "machine belongs to, HOST:PORT another one. --workers then caps the actors (default: one per CPU "
+        help="Run the episodes on a Ray cluster: 'local' (or --ray alone) starts one on this machine, 'auto' joins "
+             "the one this machine belongs to, HOST:PORT another one. --workers then caps the actors (default: one per CPU "
              "of the cluster)."),
     shard: str = typer.Option(
         None, metavar="I/N", help="Run only the episodes whose index is I modulo N (job arrays), into a folder of "

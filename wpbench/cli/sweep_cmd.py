@@ -22,8 +22,8 @@ def sweep(
     results: Path = typer.Option(Path("results"), help="Results folder: runs go to RESULTS/runs/<run>, the "
                                                         "leaderboard to RESULTS."),
     workers: int = typer.Option(None, min=1, help="Worker processes (default: the number of cores)."),
-    ray: str = typer.Option(None, "--ray", metavar="ADDRESS", help="Run on a Ray cluster instead: 'local', 'auto' "
-                                                                   "or HOST:PORT."),
+    ray: str = typer.Option(None, "--ray", metavar="ADDRESS", help="Run on a Ray cluster instead: 'local' (or --ray "
+                                                                   "alone), 'auto' or HOST:PORT."),
     progress: bool = typer.Option(True, help="Show the progress bar."),
 ) -> None:
     """Every combination of POLICIES x TASKS x EXECUTORS x ASSETS x SPLITS, all episodes scheduled at once over
