@@ -1,7 +1,8 @@
 """The panda executor against physics on fixed val episodes: gt opens the door and places
 the block, identity does not, a 30-degree rotated door fails, results repeat by seed, and a
-goal far out of the arm's reach is a failure with a reason, not a crash. Plus the base
-placement rule on made-up clouds."""
+goal far out of the arm's reach is a failure with a reason, not a crash; a bottom-hinged
+door is pulled, then pushed open, and a rotated prediction for it still fails. Plus the base
+placement rule and the pull-then-push rule on made-up doors."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from wpbench import tasks  # noqa: F401
 from wpbench.sim.arm_placement import BASE_RADIUS, base_candidates, front_direction
+from wpbench.sim.door_push import WRIST_MIN_HEIGHT, handover_fraction, push_grip
 from wpbench.sim.failure import FAILURE_REASONS, PLANNING_FAILED, UNREACHABLE
 
 
@@ -107,3 +109,42 @@ def test_placement_stands_in_front_and_clear():
     # An obstacle where the first candidate stood removes it.
     blocker = np.concatenate([cabinet, candidates[0][None, :3, 3] + [0.0, 0.0, 0.1]])
     assert not any(np.allclose(b, candidates[0]) for b in base_candidates(cabinet, blocker, tcp[None], grasp_point))
+
+
+@pytest.mark.parametrize("seed", [2, 9])   # a dishwasher and an oven: hinged at the bottom
+def test_bottom_hinged_door_is_pulled_then_pushed_open(door_env, seed):
+    r = _step(door_env, seed, lambda T: T)
+    assert r["success"], (r["failure_reason"], r["failure_detail"])
+    assert 0.0 < r["push_from"] < 1.0
+    r = _step(door_env, seed, lambda T: _rotated_30(T, seed))
+    assert not r["success"] and r["failure_reason"] in FAILURE_REASONS
+
+
+def _hinge(axis, angle, point):
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec(angle * np.asarray(axis, float)).as_matrix()
+    T[:3, 3] = point - T[:3, :3] @ point
+    return T
+
+
+def test_push_only_where_the_wrist_would_meet_the_floor():
+    # A door's outer face at x = 0.5, the cup on it at 0.7 m height, approach toward -x.
+    face = np.eye(4)
+    face[:3, :3] = [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]
+    face[:3, 3] = [0.5, 0.0, 0.7]
+    # Hinged at the bottom (axis along y at floor level + 0.1 m), opening 90 deg outward and down.
+    bottom = _hinge([0.0, 1.0, 0.0], np.pi / 2, np.array([0.5, 0.0, 0.1]))
+    u = handover_fraction(bottom, face)
+    assert u is not None and 0.0 < u < 1.0
+    at_end = bottom @ face
+    assert at_end[2, 3] - 0.21 * at_end[2, 2] < WRIST_MIN_HEIGHT   # the face grasp would need the wrist underground
+    # The pushing hand faces the other way, on the door's inner side.
+    push = push_grip(face)
+    assert np.allclose(push[:3, 2], -face[:3, 2]) and push[0, 3] < face[0, 3]
+    # Hinged at the side (vertical axis): the face grasp follows the whole arc.
+    side = _hinge([0.0, 0.0, 1.0], np.pi / 2, np.array([0.5, 0.4, 0.0]))
+    assert handover_fraction(side, face) is None
+    # A drawer (no turn) is never pushed.
+    slide = np.eye(4)
+    slide[0, 3] = 0.3
+    assert handover_fraction(slide, face) is None

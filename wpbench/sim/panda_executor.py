@@ -7,7 +7,9 @@ has to reach them.
 
 1. The TCP path is written as a script: free-space moves to a pre-grasp pose, and
    Cartesian pieces (approach, the screw about the predicted hinge or the carry, retreat)
-   between grasps and releases.
+   between grasps and releases. A door is grasped no higher than the arm reaches; a door
+   whose face the wrist cannot follow to the end (hinged at its bottom) is pulled part of
+   the way, then pushed from its inner side along the rest of the screw (wpbench.sim.door_push).
 2. Planning (mplib, wpbench.sim.arm_planner), before anything moves: for each base
    placement (wpbench.sim.arm_placement) the arm's joint path is solved, pose by pose
    along every Cartesian piece (IK seeded with the last pose; no jump, within the joint
@@ -35,6 +37,7 @@ import numpy as np
 
 from wpbench.sim.arm_placement import base_candidates
 from wpbench.sim.arm_planner import ARM_LINKS, HAND_LINKS, ArmPlanner, PlannerError
+from wpbench.sim.door_push import handover_fraction, push_grip
 from wpbench.sim.executor import ExecutionResult, blown_up, simulate_until_still
 from wpbench.sim.failure import (BLOW_UP, COLLISION, GRASP_MISSED, PLANNING_FAILED, SLIPPED, STALLED_AGAINST_HINGE,
                                  UNREACHABLE)
@@ -65,6 +68,10 @@ FLOOR_SPACING = 0.05         # m ...
 FLOOR_FREE_RADIUS = 0.25     # m ... except under the base
 MAX_CHAIN_STARTS = 3         # IK solutions of the pre-grasp pose from which the Cartesian chain is tried
 SYMMETRIC_ROLLS = (0.0, np.pi)
+MAX_GRASP_HEIGHT = 0.9       # m, a door is grasped no higher than this (the arm stands on the floor) ...
+MIN_LOW_POINTS = 20          # ... when it shows at least this many points below it
+PUSH_RETREAT = 0.12          # m, the hand backs off this far from a door it pulled before it pushes
+PUSH_DOOR_LAG = 0.08         # rad, the move to a push keeps clear of the door up to this far behind its plan
 TOP_SUCTION_ROLLS = (0.0, np.pi, np.pi / 2, -np.pi / 2)
 
 
@@ -139,13 +146,15 @@ def _line(a: np.ndarray, b: np.ndarray, check_stall: bool = True) -> Path:
     return Path(pose, _segment_seconds(a, b), sampled, check_stall)
 
 
-def _screw(cross_pose: np.ndarray, grip: np.ndarray) -> Path:
-    length = path_length(cross_pose, grip[:3, 3])
-    angle = screw_of(cross_pose).angle
+def _screw(cross_pose: np.ndarray, grip: np.ndarray, start: float = 0.0, end: float = 1.0) -> Path:
+    """The TCP ``grip`` (4, 4, held with the door as it was) along the predicted screw from
+    fraction ``start`` to ``end``."""
+    length = path_length(cross_pose, grip[:3, 3]) * (end - start)
+    angle = screw_of(cross_pose).angle * (end - start)
     samples = max(2, int(np.ceil(max(length / SCREW_STEP, angle / SCREW_STEP_ANGLE))) + 1)
-    seconds = _segment_seconds(np.eye(4), cross_pose, length)
-    sampled = interpolate(cross_pose, np.linspace(0.0, 1.0, samples)) @ grip
-    return Path(lambda u: interpolate(cross_pose, u) @ grip, seconds, sampled)
+    seconds = _segment_seconds(np.eye(4), interpolate(cross_pose, end - start), length)
+    sampled = interpolate(cross_pose, np.linspace(start, end, samples)) @ grip
+    return Path(lambda u: interpolate(cross_pose, start + u * (end - start)) @ grip, seconds, sampled)
 
 
 def _approach(grasp: Grasp, suction: bool, obstacles: np.ndarray) -> list:
@@ -158,10 +167,11 @@ def _approach(grasp: Grasp, suction: bool, obstacles: np.ndarray) -> list:
     return [Move(pre, obstacles), _line(pre, contact, check_stall=False), GraspStep(grasp)]
 
 
-def _retreat(at: np.ndarray, approach: np.ndarray, retreat_to: np.ndarray | None = None) -> list:
+def _retreat(at: np.ndarray, approach: np.ndarray, retreat_to: np.ndarray | float | None = None) -> list:
+    """Let go, back off along the approach (RETREAT_DISTANCE, or ``retreat_to`` metres) or to the pose ``retreat_to``."""
     back = at.copy()
-    if retreat_to is None:
-        back[:3, 3] -= RETREAT_DISTANCE * approach
+    if retreat_to is None or np.ndim(retreat_to) == 0:
+        back[:3, 3] -= (RETREAT_DISTANCE if retreat_to is None else float(retreat_to)) * approach
     else:
         back[:3, 3] = retreat_to[:3, 3]
     return [ReleaseStep(), _line(at, back, check_stall=False)]
@@ -499,9 +509,14 @@ def execute_articulated_panda(scene: ArmScene, action_points: np.ndarray, anchor
                               hold_joint: Callable[[], None]) -> ExecutionResult:
     """Grasp the door or drawer as the gripper does, move it along the predicted screw, release, settle."""
     suction = scene.grasp_mode == "suction"
-    grasp = (suction_point if suction else articulated_grasp)(action_points, cross_pose)
+    choose = suction_point if suction else articulated_grasp
+    grasp = choose(action_points, cross_pose)
     if grasp is None:   # the prediction moves nothing: the arm has nothing to do
         return _finish(None, _settle(scene), {"grasp_point": None})
+    low = action_points[action_points[:, 2] <= MAX_GRASP_HEIGHT]
+    if grasp.tcp[2, 3] > MAX_GRASP_HEIGHT and len(low) >= MIN_LOW_POINTS:
+        # A tall door: the same choice among the door points a floor-standing arm reaches.
+        grasp = choose(low, cross_pose) or grasp
     extra = {"grasp_point": grasp.tcp[:3, 3].round(4).tolist(), "grasp_approach": grasp.approach.round(4).tolist(),
              "grasp_width": grasp.width}
     path = interpolate(cross_pose, np.linspace(0, 1, 11)) @ grasp.tcp
@@ -509,16 +524,49 @@ def execute_articulated_panda(scene: ArmScene, action_points: np.ndarray, anchor
     if _below_floor(path):
         return _finish(None, ExecutionResult(ok=False, reason=UNREACHABLE, detail="the path goes under the floor"), extra)
     scene_points = np.concatenate([anchor_points, action_points])
+    # A face the wrist cannot follow to the end (a bottom-hinged door): let go and push the rest.
+    handover = handover_fraction(cross_pose, grasp.tcp) if suction else None
+    if handover is not None:
+        extra["push_from"] = handover
     scripts = []
     for roll in SYMMETRIC_ROLLS:
         g = _rolled_grasp(grasp, roll)
-        screw = _screw(cross_pose, g.tcp)
-        scripts.append([*_approach(g, suction, scene_points), FreeJointStep(), screw,
-                        *_retreat(screw.poses(1.0), g.approach)])
+        if handover is None:
+            screw = _screw(cross_pose, g.tcp)
+            scripts.append([*_approach(g, suction, scene_points), FreeJointStep(), screw,
+                            *_retreat(screw.poses(1.0), g.approach)])
+            continue
+        pull = _screw(cross_pose, g.tcp, 0.0, handover)
+        push = _screw(cross_pose, push_grip(g.tcp), handover, 1.0)
+        start, end = push.poses(0.0), push.poses(1.0)
+        before = start.copy()
+        before[:3, 3] -= PREGRASP_DISTANCE * start[:3, 2]
+        # The door where the pull left it, or up to PUSH_DOOR_LAG behind (the cup gives a little),
+        # filled in between neighbouring points (a sparse cloud leaves gaps the hand could slip through).
+        lag = min(handover, PUSH_DOOR_LAG / max(screw_of(cross_pose).angle, 1e-9))
+        door_then = np.concatenate([_moved(action_points, M) for M in
+                                    interpolate(cross_pose, np.linspace(handover - lag, handover, 4))])
+        scripts.append([*_approach(g, suction, scene_points), FreeJointStep(), pull,
+                        *_retreat(pull.poses(1.0), pull.poses(1.0)[:3, 2], PUSH_RETREAT),
+                        Move(before, np.concatenate([anchor_points, _densified(door_then)])),
+                        _line(before, start, check_stall=False),
+                        push, *_retreat(end, end[:3, 2])])
     # The base keeps clear of the door's predicted sweep too.
     swept = np.concatenate([_moved(action_points, T) for T in interpolate(cross_pose, np.linspace(0, 1, 7))])
     return _run(scene, scripts, SYMMETRIC_ROLLS, anchor_points, np.concatenate([anchor_points, swept]),
                 grasp.tcp[:3, 3], extra, STALLED_AGAINST_HINGE, free_joint, hold_joint)
+
+
+def _densified(points: np.ndarray, neighbours: int = 6) -> np.ndarray:
+    """The cloud (N, 3) plus the midpoints between each point and its nearest neighbours
+    (those within twice the median nearest-neighbour distance)."""
+    from scipy.spatial import cKDTree
+
+    d, idx = cKDTree(points).query(points, k=neighbours + 1)
+    near = d[:, 1:] <= 2.0 * np.median(d[:, 1])
+    a = np.repeat(np.arange(len(points)), neighbours).reshape(-1, neighbours)[near]
+    b = idx[:, 1:][near]
+    return np.concatenate([points, (points[a] + points[b]) / 2])
 
 
 def _moved(points: np.ndarray, T: np.ndarray) -> np.ndarray:
