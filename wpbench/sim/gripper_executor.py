@@ -4,14 +4,19 @@ It sees what a policy sees (the stage's observed clouds) and the predicted cross
 nothing else. Physics decides the outcome:
 
 - Articulated: grasp the moving part where the predicted motion is largest
-  (wpbench.sim.grasp_choice), close the fingers (friction), move the hand along the
+  (wpbench.sim.grasp_choice), close the fingers (friction) or seal the cup after a
+  guarded approach that stops where the hand touches (suction), move the hand along the
   screw path from the identity to T (an arc about the predicted hinge, a line for a
-  slide) with bounded force and speed, release, retreat, and let the scene settle.
-  The joint is free while the hand moves it; a wrong axis pulls against the hinge and
-  the hand stalls or the part slips out of the fingers.
-- Free-floating: grasp the object from above, lift it, carry it at the lowest height
-  above the predicted goal that clears the observed anchor cloud to above the goal, lower it to the predicted pose,
-  release, retreat and settle. The furniture collides with hand and object all the way.
+  slide) with bounded force and speed, hand the joint to its spring, release, retreat,
+  and let the scene settle. The joint is free while the hand moves it; a wrong axis
+  pulls against the hinge and the hand stalls or the part slips out of the fingers.
+- Free-floating: the goal is the predicted one, turned upright when it tumbles a
+  box-symmetric object and put down on the observed surface when it sinks a little into
+  it (wpbench.sim.place_goal). Under a roof, suction from the side through the opening
+  (wpbench.sim.side_entry); otherwise grasp the object from above, lift it, carry it at
+  the lowest height above the goal that clears the observed anchor cloud to above the
+  goal, lower it to the goal, release, retreat and settle. The furniture collides with
+  hand and object all the way.
 
 When the hand misses, stalls, slips or collides it stops, lets go, and the scene is
 scored as it is (``ok`` stays True, ``reason`` says what went wrong and becomes the
@@ -31,6 +36,7 @@ from wpbench.sim.failure import (BLOW_UP, COLLISION, GRASP_MISSED, PLANNING_FAIL
                                  UNREACHABLE)
 from wpbench.sim.grasp_choice import Grasp, articulated_grasp, carry_height, suction_point, top_grasp, top_suction_point
 from wpbench.sim.gripper import FINGER_OPEN, FloatingGripper
+from wpbench.sim.place_goal import rest_on_support, upright_equivalent
 from wpbench.sim.screw_path import interpolate, path_length
 from wpbench.sim.side_entry import SidePlan, is_roofed, plan_side_entry
 
@@ -48,6 +54,9 @@ STALL_DISTANCE = 0.05        # m: the TCP this far behind its target has been st
 STALL_ANGLE = 0.35           # rad: ... or turned this far from it
 SUCTION_PRESS = 0.006       # m: the cup is pushed this far past the surface to seal
 SUCTION_SLIP = 0.02          # m: the cup stretched this far has let go
+GUARD_START = 0.02           # m: a guarded approach slows down this far short of the observed surface ...
+GUARD_DEPTH = 0.05           # m: ... and creeps on at most this far past it
+GUARD_SPEED = 0.05           # m/s
 GRASPS = ("friction", "suction")
 LIFT_HEIGHT = 0.05           # m, lift above the start before carrying
 CARRY_CLEARANCE = 0.03       # m, carry this far above the predicted goal, then lower
@@ -150,9 +159,11 @@ class _Runner:
             return False
         return g.opening < HELD_OPENING
 
-    def grasp(self, grasp: Grasp) -> None:
+    def grasp(self, grasp: Grasp, guarded: bool = False) -> np.ndarray:
+        """Take hold at ``grasp``; returns the TCP pose the hand holds at (``grasp.tcp``
+        unless a guarded suction approach touched the surface elsewhere along the approach)."""
         if self.s.grasp_mode == "suction":
-            return self._suction_grasp(grasp)
+            return self._suction_grasp(grasp, guarded)
         g = self.s.gripper
         pre = grasp.tcp.copy()
         pre[:3, 3] -= PREGRASP_DISTANCE * grasp.approach
@@ -165,21 +176,55 @@ class _Runner:
         if g.opening > BLOCKED_OPENING:
             raise _Abort(GRASP_MISSED, "the fingers could not close (nothing to pinch)")
         self.holding = True
+        return grasp.tcp
 
-    def _suction_grasp(self, grasp: Grasp) -> None:
+    def _suction_grasp(self, grasp: Grasp, guarded: bool = False) -> np.ndarray:
+        """Seal the cup on the surface at ``grasp``; returns the TCP pose it holds at. With
+        ``guarded``, the hand comes in at MAX_SPEED to GUARD_START short of the observed surface,
+        then creeps on at GUARD_SPEED, until it touches something (at most GUARD_DEPTH past the
+        surface) and presses SUCTION_PRESS from there: a camera's cloud may not show the face
+        the cup meets where it is, and a door is not pushed shut by a hand that expected it further in."""
         g = self.s.gripper
+        a = grasp.approach
         pre = grasp.tcp.copy()
-        pre[:3, 3] -= PREGRASP_DISTANCE * grasp.approach
-        press = grasp.tcp.copy()
-        press[:3, 3] += SUCTION_PRESS * grasp.approach
+        pre[:3, 3] -= PREGRASP_DISTANCE * a
         g.teleport(pre, opening=0.0)
-        self.line(pre, press, check_stall=False)
+        held = grasp.tcp
+        if guarded:
+            near = grasp.tcp.copy()
+            near[:3, 3] -= GUARD_START * a
+            touched = self._creep(pre, PREGRASP_DISTANCE - GUARD_START, a, MAX_SPEED)
+            if touched is None:
+                touched = self._creep(near, GUARD_START + GUARD_DEPTH, a, GUARD_SPEED)
+            if touched is None:
+                raise _Abort(GRASP_MISSED, "the suction cup touched nothing")
+            held = touched
+        press = held.copy()
+        press[:3, 3] += SUCTION_PRESS * a
+        self.line(g.tcp_pose() if guarded else pre, press, check_stall=False)
         self.wait(HOLD_SECONDS)
         body = g.touched_body(self.s.ms_scene.px.get_contacts())
         if body is None:
             raise _Abort(GRASP_MISSED, "the suction cup touched nothing")
         g.attach(self.s.ms_scene, body)
         self.holding = True
+        return held
+
+    def _creep(self, start: np.ndarray, depth: float, approach: np.ndarray, speed: float) -> np.ndarray | None:
+        """Move the TCP target from ``start`` along ``approach`` at ``speed``, at most ``depth``;
+        the TCP pose (``start``'s orientation, the reached position) at the first touch, or None."""
+        g = self.s.gripper
+        per_step = speed * self.s.timestep
+        for k in range(1, int(np.ceil(depth / per_step)) + 1):
+            target = start.copy()
+            target[:3, 3] += min(k * per_step, depth) * approach
+            g.set_target(target)
+            self.tick()
+            if g.touched_body(self.s.ms_scene.px.get_contacts()) is not None:
+                reached = start.copy()
+                reached[:3, 3] += float((g.tcp_pose()[:3, 3] - start[:3, 3]) @ approach) * approach
+                return reached
+        return None
 
     def release(self, approach: np.ndarray, retreat_to: np.ndarray | None = None) -> None:
         """Let go, back off RETREAT_DISTANCE against ``approach`` (or to the TCP pose
@@ -235,11 +280,13 @@ def execute_articulated_gripper(scene: Scene, action_points: np.ndarray, cross_p
     if _below_floor(path):
         return _unreachable(run, extra)
     try:
-        run.grasp(grasp)
+        held = run.grasp(grasp, guarded=True)
+        extra["held_point"] = held[:3, 3].round(4).tolist()
         free_joint()   # held by the hand from now on (until then the joint keeps its place)
-        seconds = _segment_seconds(np.eye(4), cross_pose, path_length(cross_pose, grasp.tcp[:3, 3]))
-        run.follow(lambda u: interpolate(cross_pose, u) @ grasp.tcp, seconds)
-        run.release(grasp.approach)
+        seconds = _segment_seconds(np.eye(4), cross_pose, path_length(cross_pose, held[:3, 3]))
+        run.follow(lambda u: interpolate(cross_pose, u) @ held, seconds)
+        hold_joint()   # the joint keeps where the hand has brought it, before the hand lets go
+        run.release((cross_pose @ held)[:3, 2])   # back off along the approach as the door now stands
     except _Abort as abort:
         scene.gripper.detach()
         scene.gripper.set_fingers(2 * FINGER_OPEN)
@@ -251,7 +298,6 @@ def execute_articulated_gripper(scene: Scene, action_points: np.ndarray, cross_p
         result = ExecutionResult(ok=abort.reason != BLOW_UP, reason=abort.reason, detail=str(abort.detail),
                                  sim_seconds=settled.sim_seconds, at_rest=settled.at_rest)
         return _finish(run, result, extra)
-    hold_joint()
     return _finish(run, _settle(scene), extra)
 
 
@@ -304,6 +350,11 @@ def execute_side_entry(scene: Scene, run: _Runner, object_points: np.ndarray, pl
     return _finish(run, _settle(scene), extra)
 
 
+def _with(result: ExecutionResult, details: dict) -> ExecutionResult:
+    result.details.update(details)
+    return result
+
+
 def execute_free_gripper(scene: Scene, object_points: np.ndarray, anchor_points: np.ndarray,
                          cross_pose: np.ndarray, viewpoint: np.ndarray | None = None) -> ExecutionResult:
     """Put the object at the predicted goal. Suction, when the observed anchor roofs the
@@ -312,20 +363,26 @@ def execute_free_gripper(scene: Scene, object_points: np.ndarray, anchor_points:
     its top, carry it over the predicted goal, lower it there, release, settle. A path
     under the floor is ``unreachable``."""
     run = _Runner(scene, COLLISION, slip_check=True)
+    # The goal the hand can reach: a tumble of a box-symmetric object becomes the upright
+    # equivalent, a goal sunk into the observed surface under it is put down on it.
+    upright = upright_equivalent(object_points, cross_pose)
+    goal_change = {"goal_turned_deg": round(float(np.degrees(_pose_distance(np.asarray(cross_pose), upright)[1])), 2)}
+    cross_pose = rest_on_support(object_points, anchor_points, upright)
+    goal_change["goal_raised_m"] = round(float(cross_pose[2, 3] - upright[2, 3]), 4)
     if scene.grasp_mode == "suction" and is_roofed(object_points, anchor_points, cross_pose):
         plan = plan_side_entry(object_points, anchor_points, cross_pose, viewpoint)
         if plan is not None:
-            return execute_side_entry(scene, run, object_points, plan)
+            return _with(execute_side_entry(scene, run, object_points, plan), goal_change)
     grasp = top_suction_point(object_points) if scene.grasp_mode == "suction" else top_grasp(object_points)
     if grasp is None:
         return _finish(run, ExecutionResult(ok=False, reason=PLANNING_FAILED,
-                                            detail="the object is wider than the fingers open"), {"grasp_point": None})
+                                            detail="the object is wider than the fingers open"), {"grasp_point": None, **goal_change})
     start = grasp.tcp
     goal = cross_pose @ start
     rise = carry_height(object_points, anchor_points, start[:3, 3], goal[:3, 3])
     if rise is None:
         return _finish(run, ExecutionResult(ok=False, reason=PLANNING_FAILED,
-                                            detail="no carry height clears the observed furniture"), {"grasp_point": None})
+                                            detail="no carry height clears the observed furniture"), {"grasp_point": None, **goal_change})
     lifted = start.copy()
     above_goal = goal.copy()
     travel_z = max(start[2, 3] + LIFT_HEIGHT, goal[2, 3] + max(CARRY_CLEARANCE, rise))
@@ -334,7 +391,7 @@ def execute_free_gripper(scene: Scene, object_points: np.ndarray, anchor_points:
     waypoints = [start, lifted, above_goal, goal]
     extra = {"grasp_point": start[:3, 3].round(4).tolist(), "grasp_approach": grasp.approach.round(4).tolist(),
              "grasp_width": grasp.width, "entry": "top",
-             "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints]}
+             "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints], **goal_change}
     if _below_floor(np.stack(waypoints)):
         return _unreachable(run, extra)
     try:

@@ -29,7 +29,7 @@ FLOOR_GAP = 0.006             # m, the palm keeps this far above the floor the o
 CUP_EDGE = 0.012              # m, the cup keeps this far from the face's top edge
 INSERT_LIFT = 0.006           # m, the object slides in this far above its goal plus the clearance, then is lowered
 MAX_INSERT_RISE = 0.16        # m, the highest slide above the lowest one tried
-INSERT_RISE_STEP = 0.02       # m
+INSERT_RISE_STEP = 0.01       # m
 PICK_LIFT = 0.04              # m, lifted this far off the floor before anything else
 PREGRASP = 0.10               # m, the hand starts this far back from the face
 FACE_ANGLE_STEP_DEG = 1.0     # resolution of the search for the object's side faces
@@ -158,13 +158,15 @@ def face_yaws(points: np.ndarray) -> np.ndarray:
     return best + np.arange(4) * np.pi / 2
 
 
-def _face_tcp(points: np.ndarray, out: np.ndarray, floor: float) -> np.ndarray | None:
+def _face_tcp(points: np.ndarray, out: np.ndarray, floor: float, tilt: float = 0.0) -> np.ndarray | None:
     """TCP (4, 4) of a cup on the face of ``points`` (N, 3) that looks along the horizontal
-    ``out`` (3,), at the face's middle, high enough that the palm clears ``floor``; None
-    when the face is too low for the palm."""
+    ``out`` (3,), at the face's middle, high enough that the palm clears ``floor`` even when
+    the hand is tilted by ``tilt`` (rad; the cross-pose's tilt, by which the hand holding the
+    object level at the goal is tilted at the pick); None when the face is too low for the palm."""
     side = np.cross([0.0, 0.0, 1.0], out)
     along, lateral, z = points @ out, points @ side, points[:, 2]
-    low = max((z.min() + z.max()) / 2, floor + HAND_HALF_THICKNESS + FLOOR_GAP)
+    tilt_drop = np.sin(min(abs(tilt), np.pi / 2)) * (HAND_HALF_WIDTH + HAND_BACK)
+    low = max((z.min() + z.max()) / 2, floor + HAND_HALF_THICKNESS + FLOOR_GAP + tilt_drop)
     if low > z.max() - CUP_EDGE:
         return None
     centre = (lateral.min() + lateral.max()) / 2
@@ -267,12 +269,13 @@ def plan_side_entry(object_points: np.ndarray, anchor_points: np.ndarray, cross_
     T = np.asarray(cross_pose, dtype=np.float64)
     goal_points = _transform(T, obj)
     floor = float(obj[:, 2].min())
+    tilt = float(np.arccos(np.clip(T[2, 2], -1.0, 1.0)))
     clearance = surface_clearance(anchor)
     lift = clearance + INSERT_LIFT
     candidates = []
     for yaw in face_yaws(goal_points):
         out = np.array([np.cos(yaw), np.sin(yaw), 0.0])
-        goal = _face_tcp(goal_points, out, float(goal_points[:, 2].min()))
+        goal = _face_tcp(goal_points, out, float(goal_points[:, 2].min()), tilt)
         if goal is None:
             continue
         boxes = [held_box(goal_points, goal), hand_box()]
