@@ -69,7 +69,8 @@ FLOOR_FREE_RADIUS = 0.25     # m ... except under the base
 MAX_CHAIN_STARTS = 3         # IK solutions of the pre-grasp pose from which the Cartesian chain is tried
 SYMMETRIC_ROLLS = (0.0, np.pi)
 MAX_GRASP_HEIGHT = 0.9       # m, a door is grasped no higher than this (the arm stands on the floor) ...
-MIN_LOW_POINTS = 20          # ... when it shows at least this many points below it
+MIN_GRASP_HEIGHT = 0.3       # ... and then no lower than this ...
+MIN_LOW_POINTS = 20          # ... when it shows at least this many points in between
 PUSH_RETREAT = 0.12          # m, the hand backs off this far from a door it pulled before it pushes
 PUSH_DOOR_LAG = 0.08         # rad, the move to a push keeps clear of the door up to this far behind its plan
 TOP_SUCTION_ROLLS = (0.0, np.pi, np.pi / 2, -np.pi / 2)
@@ -513,9 +514,10 @@ def execute_articulated_panda(scene: ArmScene, action_points: np.ndarray, anchor
     grasp = choose(action_points, cross_pose)
     if grasp is None:   # the prediction moves nothing: the arm has nothing to do
         return _finish(None, _settle(scene), {"grasp_point": None})
-    low = action_points[action_points[:, 2] <= MAX_GRASP_HEIGHT]
+    z = action_points[:, 2]
+    low = action_points[(z >= MIN_GRASP_HEIGHT) & (z <= MAX_GRASP_HEIGHT)]
     if grasp.tcp[2, 3] > MAX_GRASP_HEIGHT and len(low) >= MIN_LOW_POINTS:
-        # A tall door: the same choice among the door points a floor-standing arm reaches.
+        # A tall door: the same choice among the door points a floor-standing arm reaches well.
         grasp = choose(low, cross_pose) or grasp
     extra = {"grasp_point": grasp.tcp[:3, 3].round(4).tolist(), "grasp_approach": grasp.approach.round(4).tolist(),
              "grasp_width": grasp.width}
