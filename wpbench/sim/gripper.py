@@ -152,15 +152,20 @@ class FloatingGripper:
         for joint in self.finger_joints:
             joint.set_drive_target(half)
 
-    def touched_body(self, contacts):
-        """The body (rigid component) in contact with the hand or fingers (the closest one), or None."""
+    def touched_body(self, contacts, near: float | None = None):
+        """The body (rigid component) in contact with the hand or fingers (the closest one), or
+        None; with ``near`` (m), only contact points that close to the TCP (the cup) count."""
         mine = {l.entity.per_scene_id for l in self.links}
         best, best_gap = None, TOUCH_GAP
+        tcp = self.tcp_pose()[:3, 3] if near is not None else None
         for c in contacts:
             ids = (c.bodies[0].entity.per_scene_id, c.bodies[1].entity.per_scene_id)
             if (ids[0] in mine) == (ids[1] in mine) or not c.points:
                 continue
-            gap = min(float(p.separation) for p in c.points)
+            points = [p for p in c.points if tcp is None or np.linalg.norm(np.asarray(p.position) - tcp) < near]
+            if not points:
+                continue
+            gap = min(float(p.separation) for p in points)
             if gap < best_gap:
                 best, best_gap = c.bodies[1] if ids[0] in mine else c.bodies[0], gap
         return best

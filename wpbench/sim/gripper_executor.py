@@ -57,6 +57,7 @@ SUCTION_SLIP = 0.02          # m: the cup stretched this far has let go
 GUARD_START = 0.02           # m: a guarded approach slows down this far short of the observed surface ...
 GUARD_DEPTH = 0.05           # m: ... and creeps on at most this far past it
 GUARD_SPEED = 0.05           # m/s
+CUP_REACH = 0.04             # m: a guarded approach stops on a touch this close to the TCP (the cup), not on the palm's
 GRASPS = ("friction", "suction")
 LIFT_HEIGHT = 0.05           # m, lift above the start before carrying
 CARRY_CLEARANCE = 0.03       # m, carry this far above the predicted goal, then lower
@@ -180,30 +181,36 @@ class _Runner:
 
     def _suction_grasp(self, grasp: Grasp, guarded: bool = False) -> np.ndarray:
         """Seal the cup on the surface at ``grasp``; returns the TCP pose it holds at. With
-        ``guarded``, the hand comes in at MAX_SPEED to GUARD_START short of the observed surface,
-        then creeps on at GUARD_SPEED, until it touches something (at most GUARD_DEPTH past the
-        surface) and presses SUCTION_PRESS from there: a camera's cloud may not show the face
-        the cup meets where it is, and a door is not pushed shut by a hand that expected it further in."""
+        ``guarded``, the hand comes in at MAX_SPEED to GUARD_START short of the observed
+        surface, then creeps on at GUARD_SPEED until the cup touches something (a contact
+        within CUP_REACH of the TCP; at most GUARD_DEPTH past the surface) and presses
+        SUCTION_PRESS from there (at the observed surface when the cup touched nothing): a
+        camera's cloud may not show the face the cup meets where it is, and a door is not
+        pushed shut by a hand that expected it further in. The cup seals on the body it
+        touches (any body the hand touches when the cup touched nothing)."""
         g = self.s.gripper
         a = grasp.approach
         pre = grasp.tcp.copy()
         pre[:3, 3] -= PREGRASP_DISTANCE * a
         g.teleport(pre, opening=0.0)
-        held = grasp.tcp
+        held, touched = grasp.tcp, None
         if guarded:
             near = grasp.tcp.copy()
             near[:3, 3] -= GUARD_START * a
             touched = self._creep(pre, PREGRASP_DISTANCE - GUARD_START, a, MAX_SPEED)
             if touched is None:
                 touched = self._creep(near, GUARD_START + GUARD_DEPTH, a, GUARD_SPEED)
-            if touched is None:
-                raise _Abort(GRASP_MISSED, "the suction cup touched nothing")
-            held = touched
+            # The cup met nothing on the way (the palm, stopped by something else, kept it
+            # off): press at the observed surface, as an unguarded approach does.
+            held = grasp.tcp if touched is None else touched
         press = held.copy()
         press[:3, 3] += SUCTION_PRESS * a
         self.line(g.tcp_pose() if guarded else pre, press, check_stall=False)
         self.wait(HOLD_SECONDS)
-        body = g.touched_body(self.s.ms_scene.px.get_contacts())
+        contacts = self.s.ms_scene.px.get_contacts()
+        body = g.touched_body(contacts, near=CUP_REACH) if touched is not None else None
+        if body is None:
+            body = g.touched_body(contacts)
         if body is None:
             raise _Abort(GRASP_MISSED, "the suction cup touched nothing")
         g.attach(self.s.ms_scene, body)
@@ -220,7 +227,7 @@ class _Runner:
             target[:3, 3] += min(k * per_step, depth) * approach
             g.set_target(target)
             self.tick()
-            if g.touched_body(self.s.ms_scene.px.get_contacts()) is not None:
+            if g.touched_body(self.s.ms_scene.px.get_contacts(), near=CUP_REACH) is not None:
                 reached = start.copy()
                 reached[:3, 3] += float((g.tcp_pose()[:3, 3] - start[:3, 3]) @ approach) * approach
                 return reached
