@@ -65,14 +65,16 @@ def test_nearest_wall_is_beside_the_object_not_under_it():
 
 
 def test_door_turned_30_degrees_fails_under_the_gripper():
+    # Episode 3 is a safe's side-hinged door: turned 30 deg about its random axis, the hand
+    # pulls against the hinge. (A drawer turned about an axis near its rail may still open.)
     env = gym.make("wpbench/OpenDoor-v0", obs_mode="mesh", assets="procedural", split="val",
                    executor="gripper", grasp="suction")
     try:
         outcomes = {}
         for size in (0.0, 30.0):
             policy = PerturbedTruth(PerturbedTruthConfig(perturbation="rotation", size=size), env.unwrapped)
-            policy.seed = 1
-            outcomes[size] = run_episode(env, policy, 1)
+            policy.seed = 3
+            outcomes[size] = run_episode(env, policy, 3)
     finally:
         env.close()
     assert outcomes[0.0]["success"]
