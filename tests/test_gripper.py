@@ -7,10 +7,10 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from wpbench import tasks  # noqa: F401
 from wpbench.sim.failure import FAILURE_REASONS
+from executor_helpers import rotated_30, step_with
 
 
 @pytest.fixture(scope="module")
@@ -21,25 +21,11 @@ def door_env():
     env.close()
 
 
-def _step(env, seed, transform_of):
-    env.reset(seed=seed)
-    T = transform_of(env.unwrapped.ground_truth()["cross_pose"])
-    _, _, _, _, info = env.step(T)
-    return info["stage_result"]
-
-
-def _rotated_30(T, seed):
-    axis = np.random.default_rng(seed).normal(size=3)
-    R = np.eye(4)
-    R[:3, :3] = Rotation.from_rotvec(np.radians(30) * axis / np.linalg.norm(axis)).as_matrix()
-    return R @ T
-
-
 @pytest.mark.parametrize("seed", [0, 3])
 def test_gt_opens_identity_does_not(door_env, seed):
-    r = _step(door_env, seed, lambda T: T)
+    r = step_with(door_env, seed, lambda T: T)
     assert r["success"] and r["executor"] == "gripper" and r["grasp"] == "suction", r["failure_reason"]
-    r = _step(door_env, seed, lambda T: np.eye(4))
+    r = step_with(door_env, seed, lambda T: np.eye(4))
     assert not r["success"] and r["failure_reason"] == "not_open_enough"
 
 
@@ -49,7 +35,7 @@ def test_unknown_executor_is_a_clear_error():
 
 
 def test_same_seed_same_outcome(door_env):
-    a = _step(door_env, 5, lambda T: _rotated_30(T, 5))
-    b = _step(door_env, 5, lambda T: _rotated_30(T, 5))
+    a = step_with(door_env, 5, lambda T: rotated_30(T, 5))
+    b = step_with(door_env, 5, lambda T: rotated_30(T, 5))
     assert a["q_final"] == b["q_final"] and a["failure_reason"] == b["failure_reason"]
     assert a["failure_reason"] in ("",) + FAILURE_REASONS

@@ -15,6 +15,7 @@ from wpbench import tasks  # noqa: F401
 from wpbench.sim.arm_placement import BASE_RADIUS, base_candidates, front_direction
 from wpbench.sim.door_push import WRIST_MIN_HEIGHT, handover_fraction, push_grip
 from wpbench.sim.failure import FAILURE_REASONS, PLANNING_FAILED, UNREACHABLE
+from executor_helpers import rotated_30, step_with
 
 
 @pytest.fixture(scope="module")
@@ -31,20 +32,6 @@ def place_env():
     env.close()
 
 
-def _step(env, seed, transform_of):
-    env.reset(seed=seed)
-    T = transform_of(env.unwrapped.ground_truth()["cross_pose"])
-    _, _, _, _, info = env.step(T)
-    return info["stage_result"]
-
-
-def _rotated_30(T, seed):
-    axis = np.random.default_rng(seed).normal(size=3)
-    R = np.eye(4)
-    R[:3, :3] = Rotation.from_rotvec(np.radians(30) * axis / np.linalg.norm(axis)).as_matrix()
-    return R @ T
-
-
 def _far_up(T):
     """The same motion, then 3 m up: far above anything a Panda standing on the floor reaches."""
     up = np.eye(4)
@@ -54,38 +41,38 @@ def _far_up(T):
 
 @pytest.mark.parametrize("seed", [0, 6])
 def test_gt_opens_identity_does_not(door_env, seed):
-    r = _step(door_env, seed, lambda T: T)
+    r = step_with(door_env, seed, lambda T: T)
     assert r["success"] and r["executor"] == "panda", (r["failure_reason"], r["failure_detail"])
     assert len(r["arm_base"]) == 3 and r["placements_tried"] >= 1
-    r = _step(door_env, seed, lambda T: np.eye(4))
+    r = step_with(door_env, seed, lambda T: np.eye(4))
     assert not r["success"] and r["failure_reason"] == "not_open_enough"
 
 
 def test_rotated_door_fails(door_env):
-    r = _step(door_env, 0, lambda T: _rotated_30(T, 0))
+    r = step_with(door_env, 0, lambda T: rotated_30(T, 0))
     assert not r["success"] and r["failure_reason"] in FAILURE_REASONS
 
 
 def test_same_seed_same_outcome(door_env):
-    a = _step(door_env, 1, lambda T: T)
-    b = _step(door_env, 1, lambda T: T)
+    a = step_with(door_env, 1, lambda T: T)
+    b = step_with(door_env, 1, lambda T: T)
     assert a["success"] == b["success"] and a["failure_reason"] == b["failure_reason"]
     assert a["arm_base"] == b["arm_base"] and a["q_final"] == b["q_final"]
     assert a["executed_path"] == b["executed_path"]
 
 
 def test_goal_out_of_reach_is_a_failure_reason(door_env, place_env):
-    r = _step(door_env, 0, _far_up)
+    r = step_with(door_env, 0, _far_up)
     assert not r["success"] and not r["executed"] and r["failure_reason"] in (UNREACHABLE, PLANNING_FAILED)
     assert r["failure_detail"]
-    r = _step(place_env, 5, _far_up)
+    r = step_with(place_env, 5, _far_up)
     assert not r["success"] and r["failure_reason"] in (UNREACHABLE, PLANNING_FAILED), r["failure_detail"]
 
 
 def test_gt_places_identity_does_not(place_env):
-    r = _step(place_env, 5, lambda T: T)
+    r = step_with(place_env, 5, lambda T: T)
     assert r["success"] and r["executor"] == "panda", (r["failure_reason"], r["failure_detail"])
-    r = _step(place_env, 5, lambda T: np.eye(4))
+    r = step_with(place_env, 5, lambda T: np.eye(4))
     assert not r["success"]
 
 
@@ -113,10 +100,10 @@ def test_placement_stands_in_front_and_clear():
 
 @pytest.mark.parametrize("seed", [2, 9])   # a dishwasher and an oven: hinged at the bottom
 def test_bottom_hinged_door_is_pulled_then_pushed_open(door_env, seed):
-    r = _step(door_env, seed, lambda T: T)
+    r = step_with(door_env, seed, lambda T: T)
     assert r["success"], (r["failure_reason"], r["failure_detail"])
     assert 0.0 < r["push_from"] < 1.0
-    r = _step(door_env, seed, lambda T: _rotated_30(T, seed))
+    r = step_with(door_env, seed, lambda T: rotated_30(T, seed))
     assert not r["success"] and r["failure_reason"] in FAILURE_REASONS
 
 
