@@ -6,8 +6,10 @@ left alone."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
+from wpbench.sim import place_goal
 from wpbench.sim.place_goal import MAX_SUPPORT_RAISE, box_symmetries, rest_on_support, upright_equivalent
 
 
@@ -58,6 +60,20 @@ def test_a_tumbled_cube_is_put_upright_where_the_prediction_puts_it():
     # An upright prediction is kept as it is.
     level = _about([0.0, 0.0, 0.7], [0.3, 0.2, 0.05], then=[0.1, 0.0, 0.3])
     np.testing.assert_array_equal(upright_equivalent(cube, level), level)
+
+
+def test_equally_good_upright_turns_are_chosen_whatever_the_order_of_the_turns(monkeypatch):
+    cube = _box([0.1, 0.1, 0.1], [0.0, 0.0, 0.05])
+    # On its side, then a yaw of 45 deg: upright turns of +45 and -45 deg tie on tilt and angle.
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec([0, 0, np.pi / 4]).as_matrix() @ Rotation.from_rotvec([np.pi / 2, 0, 0]).as_matrix()
+    T[:3, 3] = [0.4, 0.1, 0.2]
+    chosen = upright_equivalent(cube, T)
+    assert chosen[2, 2] > 1 - 1e-9
+    assert np.degrees(np.arccos((np.trace(chosen[:3, :3]) - 1) / 2)) == pytest.approx(45.0)
+    turns = place_goal.BOX_ROTATIONS
+    monkeypatch.setattr(place_goal, "BOX_ROTATIONS", np.concatenate([turns[:1], turns[1:][::-1]]))
+    np.testing.assert_allclose(upright_equivalent(cube, T), chosen, atol=1e-12)
 
 
 def test_a_long_block_keeps_its_tumble():

@@ -22,10 +22,9 @@ observed clouds alone (never the simulator's truth). Pure numpy functions.
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 
+from wpbench.geometry.symmetry import Symmetry
 from wpbench.sim.side_entry import face_yaws
 
 EXTENT_TOLERANCE = 0.01      # m, or EXTENT_SHARE of the largest extent if more
@@ -36,19 +35,8 @@ SUPPORT_INSET = 0.01         # m, the footprint is shrunk this much (wall points
 SUPPORT_GAP = 0.002          # m, a raised goal stands this far above the observed surface
 
 
-def _box_rotations() -> list[np.ndarray]:
-    """The 24 rotations that map the coordinate axes onto themselves (signed permutations, det +1)."""
-    out = []
-    for perm in itertools.permutations(range(3)):
-        for signs in itertools.product((1.0, -1.0), repeat=3):
-            P = np.zeros((3, 3))
-            P[np.arange(3), perm] = signs
-            if np.linalg.det(P) > 0:
-                out.append(P)
-    return out
-
-
-BOX_ROTATIONS = _box_rotations()
+# The 24 rotations that map the coordinate axes onto themselves, the identity first.
+BOX_ROTATIONS = Symmetry.cube().discrete.numpy()
 
 
 def observed_box(object_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -94,11 +82,13 @@ def upright_equivalent(object_points: np.ndarray, cross_pose: np.ndarray) -> np.
     if not upright:
         return T
     top = max(C[2, 2] for C in upright)
-    return min((C for C in upright if C[2, 2] >= top - TILT_TIE), key=_angle)
+    return min((C for C in upright if C[2, 2] >= top - TILT_TIE), key=_choice_key)
 
 
-def _angle(T: np.ndarray) -> float:
-    return float(np.arccos(np.clip((np.trace(T[:3, :3]) - 1) / 2, -1.0, 1.0)))
+def _choice_key(T: np.ndarray) -> tuple:
+    """The rotation angle of ``T``, then its rotation entries, both rounded so that equal ones tie."""
+    angle = float(np.arccos(np.clip((np.trace(T[:3, :3]) - 1) / 2, -1.0, 1.0)))
+    return (round(angle, 9), *np.round(T[:3, :3].ravel(), 9))
 
 
 def rest_on_support(object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray) -> np.ndarray:
