@@ -14,6 +14,9 @@ The rule (docs/executors.md, ``panda``):
   the front than every anchor point plus BASE_RADIUS) and no obstacle point (the observed
   clouds, and the action cloud swept along its predicted motion) lies within BASE_RADIUS
   horizontally below BASE_HEIGHT: the arm's base and shoulder would stand in it.
+- After those come the candidates that stand in front of the anchor's tall part only (its
+  points at least BASE_HEIGHT high), with the same obstacle test: beside a part that lies
+  low in front of the furniture (an open oven or dishwasher door), not on it.
 
 The executor takes the first candidate from which the planner reaches every pose of the path.
 """
@@ -56,15 +59,11 @@ def base_pose(position_xy: np.ndarray, facing_xy: np.ndarray) -> np.ndarray:
     return T
 
 
-def base_candidates(anchor_points: np.ndarray, obstacle_points: np.ndarray, path_tcps: np.ndarray,
-                    grasp_point: np.ndarray) -> list[np.ndarray]:
-    """Base poses (4, 4) in the order they are tried (see the module docstring)."""
-    anchor = _check(anchor_points, "anchor_points")
-    obstacles = _check(obstacle_points, "obstacle_points")
-    tcps = np.asarray(path_tcps, dtype=np.float64).reshape(-1, 4, 4)
+def _candidates(anchor: np.ndarray, obstacles: np.ndarray, tcps: np.ndarray, grasp_point: np.ndarray,
+                front_from: np.ndarray) -> list[np.ndarray]:
     front = front_direction(anchor, grasp_point)[:2]
     centre = (anchor[:, :2].min(0) + anchor[:, :2].max(0)) / 2
-    front_edge = float(((anchor[:, :2] - centre) @ front).max())
+    front_edge = float(((front_from[:, :2] - centre) @ front).max()) if len(front_from) else -np.inf
     middle = tcps[:, :2, 3].mean(0)
     low = obstacles[obstacles[:, 2] < BASE_HEIGHT, :2]
     out = []
@@ -79,3 +78,17 @@ def base_candidates(anchor_points: np.ndarray, obstacle_points: np.ndarray, path
                 continue
             out.append(base_pose(xy, middle))
     return out
+
+
+def base_candidates(anchor_points: np.ndarray, obstacle_points: np.ndarray, path_tcps: np.ndarray,
+                    grasp_point: np.ndarray) -> list[np.ndarray]:
+    """Base poses (4, 4) in the order they are tried (see the module docstring): those in front
+    of every anchor point first, then those in front of the anchor's tall part only."""
+    anchor = _check(anchor_points, "anchor_points")
+    obstacles = _check(obstacle_points, "obstacle_points")
+    tcps = np.asarray(path_tcps, dtype=np.float64).reshape(-1, 4, 4)
+    strict = _candidates(anchor, obstacles, tcps, grasp_point, anchor)
+    tall = anchor[anchor[:, 2] >= BASE_HEIGHT]
+    beside = [b for b in _candidates(anchor, obstacles, tcps, grasp_point, tall)
+              if not any(np.allclose(b, a) for a in strict)]
+    return strict + beside

@@ -119,17 +119,22 @@ class PandaArm:
             joint.set_drive_target(half)
 
     # ------------------------------------------------------------------ grasping
-    def touched_body(self, contacts):
+    def touched_body(self, contacts, near: float | None = None):
         """The body (rigid component) the hand or fingers touch (the closest one), or None;
-        contacts of the arm's other links do not count."""
+        contacts of the arm's other links do not count. With ``near`` (m), only contact points
+        that close to the TCP (the cup) count."""
         arm = {l.entity.per_scene_id for l in self.links}
         mine = {l.entity.per_scene_id for l in self.links if l is self.hand or l is self.tcp_link or "finger" in l.name}
+        tcp = self.tcp_pose()[:3, 3] if near is not None else None
         best, best_gap = None, TOUCH_GAP
         for c in contacts:
             ids = (c.bodies[0].entity.per_scene_id, c.bodies[1].entity.per_scene_id)
             if (ids[0] in mine) == (ids[1] in mine) or ids[0] in arm and ids[1] in arm or not c.points:
                 continue
-            gap = min(float(p.separation) for p in c.points)
+            points = [p for p in c.points if tcp is None or np.linalg.norm(np.asarray(p.position) - tcp) < near]
+            if not points:
+                continue
+            gap = min(float(p.separation) for p in points)
             if gap < best_gap:
                 best, best_gap = c.bodies[1] if ids[0] in mine else c.bodies[0], gap
         return best

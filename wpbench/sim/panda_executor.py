@@ -48,6 +48,7 @@ from wpbench.sim.gripper_executor import (BLOCKED_OPENING, CARRY_CLEARANCE, CLOS
                                           RETREAT_DISTANCE, STALL_ANGLE, STALL_DISTANCE, SUCTION_PRESS, SUCTION_SLIP,
                                           _below_floor, _pose_distance, _segment_seconds, _smooth)
 from wpbench.sim.panda_arm import HOME_QPOS, PandaArm
+from wpbench.sim.place_goal import rest_on_support, upright_equivalent
 from wpbench.sim.screw_path import interpolate, path_length, screw_of
 from wpbench.sim.side_entry import is_roofed, plan_side_entry, segment_poses
 
@@ -74,6 +75,10 @@ MIN_LOW_POINTS = 20          # ... when it shows at least this many points in be
 PUSH_RETREAT = 0.12          # m, the hand backs off this far from a door it pulled before it pushes
 PUSH_DOOR_LAG = 0.08         # rad, the move to a push keeps clear of the door up to this far behind its plan
 TOP_SUCTION_ROLLS = (0.0, np.pi, np.pi / 2, -np.pi / 2)
+RELAY_LEADS = (0.05, 0.2, 0.35)          # m, a relay spot lies this much further out than the slide needs ...
+RELAY_OFFSETS = (0.0, 0.3, -0.3, 0.5, -0.5)   # m ... and this far to the side of the goal
+RELAY_MARGIN = 0.08          # m, no anchor point this close to the relayed object's footprint (the hand from above)
+MAX_RELAYS = 4               # relay spots planned at most
 
 
 @dataclass
@@ -158,13 +163,13 @@ def _screw(cross_pose: np.ndarray, grip: np.ndarray, start: float = 0.0, end: fl
     return Path(lambda u: interpolate(cross_pose, start + u * (end - start)) @ grip, seconds, sampled)
 
 
-def _approach(grasp: Grasp, suction: bool, obstacles: np.ndarray) -> list:
-    """Move to the pre-grasp pose, come in along the approach, grasp."""
+def _approach(grasp: Grasp, suction: bool, obstacles: np.ndarray, press: float = SUCTION_PRESS) -> list:
+    """Move to the pre-grasp pose, come in along the approach (a cup ``press`` past the surface), grasp."""
     pre = grasp.tcp.copy()
     pre[:3, 3] -= PREGRASP_DISTANCE * grasp.approach
     contact = grasp.tcp.copy()
     if suction:
-        contact[:3, 3] += SUCTION_PRESS * grasp.approach
+        contact[:3, 3] += press * grasp.approach
     return [Move(pre, obstacles), _line(pre, contact, check_stall=False), GraspStep(grasp)]
 
 
@@ -447,17 +452,23 @@ def _finish(run: _Runner | None, result: ExecutionResult, extra: dict) -> Execut
     return result
 
 
-def _run(scene: ArmScene, scripts: list[list], rolls: tuple[float, ...], anchor: np.ndarray, obstacles: np.ndarray, grasp_point: np.ndarray,
-         extra: dict, stall_reason: str, free_joint: Callable[[], None] | None = None,
-         hold_joint: Callable[[], None] | None = None) -> ExecutionResult:
-    """Plan the script, then carry it out; a failure stops the arm, lets go, and the scene is scored as it is."""
+def _plan(scene: ArmScene, scripts: list[list], anchor: np.ndarray, obstacles: np.ndarray, grasp_point: np.ndarray,
+          extra: dict) -> tuple[Plan | None, ExecutionResult | None]:
+    """(plan, None), or (None, the failure as a result) when no base placement works."""
     try:
         plan, reason, detail, tried = plan_script(scene.planner, scripts, anchor, obstacles, grasp_point)
     except PlannerError as err:
         plan, reason, detail, tried = None, PLANNING_FAILED, str(err), 0
-    extra["placements_tried"] = tried
+    extra["placements_tried"] = extra.get("placements_tried", 0) + tried
     if plan is None:
-        return _finish(None, ExecutionResult(ok=False, reason=reason, detail=detail), extra)
+        return None, ExecutionResult(ok=False, reason=reason, detail=detail)
+    return plan, None
+
+
+def _carry_out(scene: ArmScene, plan: Plan, rolls: tuple[float, ...], extra: dict, stall_reason: str,
+               free_joint: Callable[[], None] | None = None,
+               hold_joint: Callable[[], None] | None = None) -> ExecutionResult:
+    """Execute a plan; a failure stops the arm, lets go, and the scene is scored as it is."""
     extra["arm_base"] = plan.base[:3, 3].round(4).tolist()
     extra["tcp_roll_deg"] = float(np.degrees(rolls[plan.script_index]))
     extra["arm_base_yaw_deg"] = float(np.degrees(np.arctan2(plan.base[1, 0], plan.base[0, 0])))
@@ -491,6 +502,16 @@ def _run(scene: ArmScene, scripts: list[list], rolls: tuple[float, ...], anchor:
     if hold_joint is not None:
         hold_joint()
     return _finish(run, _settle(scene), extra)
+
+
+def _run(scene: ArmScene, scripts: list[list], rolls: tuple[float, ...], anchor: np.ndarray, obstacles: np.ndarray, grasp_point: np.ndarray,
+         extra: dict, stall_reason: str, free_joint: Callable[[], None] | None = None,
+         hold_joint: Callable[[], None] | None = None) -> ExecutionResult:
+    """Plan the script, then carry it out."""
+    plan, failed = _plan(scene, scripts, anchor, obstacles, grasp_point, extra)
+    if plan is None:
+        return _finish(None, failed, extra)
+    return _carry_out(scene, plan, rolls, extra, stall_reason, free_joint, hold_joint)
 
 
 def _rolled(T: np.ndarray, roll: float) -> np.ndarray:
@@ -590,8 +611,10 @@ def _turn_script(object_points: np.ndarray, anchor: np.ndarray, turn: float, rol
             _line(top.tcp, lifted), _line(lifted, turned), _line(turned, down), *_retreat(down, top.approach)]
 
 
-def _side_entry(scene: ArmScene, plan, object_points: np.ndarray, anchor_points: np.ndarray,
-                obstacles: np.ndarray) -> ExecutionResult:
+def _side_scripts(plan, object_points: np.ndarray, anchor_points: np.ndarray,
+                  press: float = SUCTION_PRESS) -> tuple[list[list], dict]:
+    """The side-entry plan as scripts (one per TCP roll; the cup ``press`` past the face), and
+    what the stage result records of it."""
     from wpbench.sim.side_entry import _turn_about_vertical, regrasp_centre
 
     waypoints = plan.carry_waypoints()
@@ -599,8 +622,6 @@ def _side_entry(scene: ArmScene, plan, object_points: np.ndarray, anchor_points:
              "grasp_width": 0.0, "entry": "side",
              "regrasp_turn_deg": float(np.degrees(plan.regrasp_turn)),
              "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints]}
-    if _below_floor(np.stack(waypoints)):
-        return _finish(None, ExecutionResult(ok=False, reason=UNREACHABLE, detail="the path goes under the floor"), extra)
     points_now = object_points
     if plan.regrasp_turn:
         points_now = _moved(object_points, _turn_about_vertical(plan.regrasp_turn, regrasp_centre(object_points)))
@@ -609,34 +630,25 @@ def _side_entry(scene: ArmScene, plan, object_points: np.ndarray, anchor_points:
         script = _turn_script(object_points, anchor_points, plan.regrasp_turn, roll) if plan.regrasp_turn else []
         pick = Grasp(_rolled(plan.pick, roll), plan.pick[:3, 2].copy(), 0.0)
         way = [_rolled(w, roll) for w in waypoints]
-        script += _approach(pick, True, np.concatenate([anchor_points, points_now]))
+        script += _approach(pick, True, np.concatenate([anchor_points, points_now]), press)
         script += [_line(a, b) for a, b in zip(way[:-1], way[1:])]
         script += _retreat(way[-1], plan.goal[:3, 2], plan.retreat())
         scripts.append(script)
-    return _run(scene, scripts, SYMMETRIC_ROLLS, anchor_points, obstacles, plan.pick[:3, 3], extra, COLLISION)
+    return scripts, extra
 
 
-def execute_free_panda(scene: ArmScene, object_points: np.ndarray, anchor_points: np.ndarray,
-                       cross_pose: np.ndarray, viewpoint: np.ndarray | None = None) -> ExecutionResult:
-    """Put the object at the predicted goal along the gripper's path (side entry under a
-    roof, else from above), carried by the arm."""
-    suction = scene.grasp_mode == "suction"
-    goal_points = _moved(object_points, cross_pose)
-    obstacles = np.concatenate([anchor_points, object_points, goal_points])
-    if suction and is_roofed(object_points, anchor_points, cross_pose):
-        plan = plan_side_entry(object_points, anchor_points, cross_pose, viewpoint)
-        if plan is not None:
-            return _side_entry(scene, plan, object_points, anchor_points, obstacles)
+def _top_scripts(object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray,
+                 suction: bool) -> tuple[list[list] | None, tuple[float, ...], dict, str]:
+    """Pick from above, carry over the goal at a height that clears the observed anchor, lower,
+    let go: (scripts, their TCP rolls, what the result records, why not when scripts is None)."""
     grasp = top_suction_point(object_points) if suction else top_grasp(object_points)
     if grasp is None:
-        return _finish(None, ExecutionResult(ok=False, reason=PLANNING_FAILED,
-                                             detail="the object is wider than the fingers open"), {"grasp_point": None})
+        return None, (), {"grasp_point": None}, "the object is wider than the fingers open"
     start = grasp.tcp
     goal = cross_pose @ start
     rise = carry_height(object_points, anchor_points, start[:3, 3], goal[:3, 3])
     if rise is None:
-        return _finish(None, ExecutionResult(ok=False, reason=PLANNING_FAILED,
-                                             detail="no carry height clears the observed furniture"), {"grasp_point": None})
+        return None, (), {"grasp_point": None}, "no carry height clears the observed furniture"
     lifted = start.copy()
     above_goal = goal.copy()
     travel_z = max(start[2, 3] + LIFT_HEIGHT, goal[2, 3] + max(CARRY_CLEARANCE, rise))
@@ -647,7 +659,7 @@ def execute_free_panda(scene: ArmScene, object_points: np.ndarray, anchor_points
              "grasp_width": grasp.width, "entry": "top",
              "planned_path": [w[:3, 3].round(4).tolist() for w in waypoints]}
     if _below_floor(np.stack(waypoints)):
-        return _finish(None, ExecutionResult(ok=False, reason=UNREACHABLE, detail="the path goes under the floor"), extra)
+        return None, (), extra, "the path goes under the floor"
     # A suction cup from above may turn any way about the vertical; fingers only by half a turn.
     rolls = TOP_SUCTION_ROLLS if suction else SYMMETRIC_ROLLS
     scripts = []
@@ -656,4 +668,117 @@ def execute_free_panda(scene: ArmScene, object_points: np.ndarray, anchor_points
         way = [_rolled(w, roll) for w in waypoints]
         scripts.append([*_approach(g, suction, np.concatenate([anchor_points, object_points])),
                         *[_line(a, b) for a, b in zip(way[:-1], way[1:])], *_retreat(way[-1], g.approach)])
-    return _run(scene, scripts, rolls, anchor_points, obstacles, start[:3, 3], extra, COLLISION)
+    return scripts, rolls, extra, ""
+
+
+def relay_poses(object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray,
+                side) -> list[np.ndarray]:
+    """Where the object may be set down first (motions (4, 4) of the object on the floor it
+    stands on), in the order tried: in front of the cavity's opening (``side``, the side-entry
+    plan of the direct path, says which way it looks and how far the slide is), further out or
+    to either side, turned about the vertical as the goal turns it (so the face the cup holds
+    at the goal looks out of the opening), with no observed anchor point over the object's
+    footprint widened by RELAY_MARGIN. Pure numpy."""
+    obj = np.asarray(object_points, dtype=np.float64)
+    anchor = np.asarray(anchor_points, dtype=np.float64)
+    T = np.asarray(cross_pose, dtype=np.float64)
+    centre = np.array([*(obj[:, :2].min(0) + obj[:, :2].max(0)) / 2, 0.0])
+    yaw = float(np.arctan2(T[1, 0], T[0, 0]))
+    R = np.eye(4)
+    R[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+    turned = _moved(obj - centre, R)
+    radius = float(np.linalg.norm(turned[:, :2], axis=1).max()) + RELAY_MARGIN
+    goal_points = _moved(obj, T)
+    goal_centre = (goal_points[:, :2].min(0) + goal_points[:, :2].max(0)) / 2
+    out = np.asarray(side.direction, dtype=np.float64)[:2]
+    lateral = np.array([-out[1], out[0]])
+    reach = side.staging_distance + float(np.abs(turned[:, :2] @ out).max()) + RELAY_MARGIN
+    poses = []
+    for lead in RELAY_LEADS:
+        for offset in RELAY_OFFSETS:
+            xy = goal_centre + (reach + lead) * out + offset * lateral
+            if np.any(np.linalg.norm(anchor[:, :2] - xy, axis=1) < radius):
+                continue
+            M = R.copy()
+            M[:2, 3] = xy - R[:2, :2] @ centre[:2]
+            poses.append(M)
+    return poses
+
+
+def _side_entry(scene: ArmScene, plan, object_points: np.ndarray, anchor_points: np.ndarray,
+                cross_pose: np.ndarray, viewpoint: np.ndarray | None, goal_change: dict) -> ExecutionResult:
+    """Side entry from where the object stands; when no base placement reaches both the pick and
+    the goal, a relay: the object is first carried from above and set down in front of the
+    opening (one base), then the side entry is made from there (another base: the robot's base
+    moves only while it holds nothing)."""
+    goal_points = _moved(object_points, cross_pose)
+    scripts, extra = _side_scripts(plan, object_points, anchor_points)
+    extra.update(goal_change)
+    if _below_floor(np.stack(plan.carry_waypoints())):
+        return _finish(None, ExecutionResult(ok=False, reason=UNREACHABLE, detail="the path goes under the floor"), extra)
+    obstacles = np.concatenate([anchor_points, object_points, goal_points])
+    direct, failed = _plan(scene, scripts, anchor_points, obstacles, plan.pick[:3, 3], extra)
+    if direct is not None:
+        return _carry_out(scene, direct, SYMMETRIC_ROLLS, extra, COLLISION)
+    suction = scene.grasp_mode == "suction"
+    for M in relay_poses(object_points, anchor_points, cross_pose, plan)[:MAX_RELAYS]:
+        relayed = _moved(object_points, M)
+        then = cross_pose @ np.linalg.inv(M)
+        side = plan_side_entry(relayed, anchor_points, then, viewpoint)
+        if side is None:
+            continue
+        scripts2, extra2 = _side_scripts(side, relayed, anchor_points)
+        if _below_floor(np.stack(side.carry_waypoints())):
+            continue
+        second, _ = _plan(scene, scripts2, anchor_points, np.concatenate([anchor_points, relayed, goal_points]),
+                          side.pick[:3, 3], extra)
+        if second is None:
+            continue
+        scripts1, rolls1, extra1, _ = _top_scripts(object_points, anchor_points, M, suction)
+        if scripts1 is None:
+            continue
+        first, _ = _plan(scene, scripts1, anchor_points, np.concatenate([anchor_points, object_points, relayed]),
+                         extra1["grasp_point"], extra)
+        if first is None:
+            continue
+        tried = extra["placements_tried"]
+        relay = _carry_out(scene, first, rolls1, extra1, COLLISION)
+        extra2.update(goal_change)
+        centre = (relayed.min(0) + relayed.max(0)) / 2
+        extra2.update({"placements_tried": tried, "relay_point": centre.round(4).tolist(),
+                       "relay_turn_deg": float(np.degrees(np.arctan2(M[1, 0], M[0, 0]))),
+                       "relay_base": extra1.get("arm_base"), "relay_grasp_point": extra1.get("grasp_point")})
+        if relay.reason or not relay.ok:
+            relay.details.update({k: v for k, v in extra2.items() if k.startswith("relay") or k in goal_change})
+            relay.details["placements_tried"] = tried
+            relay.detail = f"while setting the object down in front of the opening: {relay.detail}"
+            return relay
+        result = _carry_out(scene, second, SYMMETRIC_ROLLS, extra2, COLLISION)
+        result.sim_seconds += relay.sim_seconds
+        return result
+    return _finish(None, failed, extra)
+
+
+def execute_free_panda(scene: ArmScene, object_points: np.ndarray, anchor_points: np.ndarray,
+                       cross_pose: np.ndarray, viewpoint: np.ndarray | None = None) -> ExecutionResult:
+    """Put the object at the predicted goal along the gripper's path (side entry under a
+    roof, else from above), carried by the arm. The goal is the one a hand can reach, as for
+    the gripper (wpbench.sim.place_goal): a tumble of a box-symmetric object becomes its
+    upright equivalent, a goal sunk a little into the observed surface under it is put down on it."""
+    suction = scene.grasp_mode == "suction"
+    upright = upright_equivalent(object_points, cross_pose)
+    goal_change = {"goal_turned_deg": round(float(np.degrees(_pose_distance(np.asarray(cross_pose), upright)[1])), 2)}
+    cross_pose = rest_on_support(object_points, anchor_points, upright)
+    goal_change["goal_raised_m"] = round(float(cross_pose[2, 3] - upright[2, 3]), 4)
+    if suction and is_roofed(object_points, anchor_points, cross_pose):
+        plan = plan_side_entry(object_points, anchor_points, cross_pose, viewpoint)
+        if plan is not None:
+            return _side_entry(scene, plan, object_points, anchor_points, cross_pose, viewpoint, goal_change)
+    goal_points = _moved(object_points, cross_pose)
+    obstacles = np.concatenate([anchor_points, object_points, goal_points])
+    scripts, rolls, extra, why = _top_scripts(object_points, anchor_points, cross_pose, suction)
+    extra.update(goal_change)
+    if scripts is None:
+        reason = UNREACHABLE if why.endswith("floor") else PLANNING_FAILED
+        return _finish(None, ExecutionResult(ok=False, reason=reason, detail=why), extra)
+    return _run(scene, scripts, rolls, anchor_points, obstacles, np.asarray(extra["grasp_point"]), extra, COLLISION)
