@@ -1,8 +1,9 @@
 """The panda executor against physics on fixed val episodes: gt opens the door and places
 the block, identity does not, a 30-degree rotated door fails, results repeat by seed, and a
 goal far out of the arm's reach is a failure with a reason, not a crash; a bottom-hinged
-door is pulled, then pushed open, and a rotated prediction for it still fails. Plus the base
-placement rule and the pull-then-push rule on made-up doors."""
+door is pulled, then pushed open, and a rotated prediction for it still fails; a block whose
+side entry no single base reaches is relayed (camera episode). Plus the base placement rule,
+the relay spots and the pull-then-push rule on made-up boxes and doors."""
 
 from __future__ import annotations
 
@@ -135,3 +136,42 @@ def test_push_only_where_the_wrist_would_meet_the_floor():
     slide = np.eye(4)
     slide[0, 3] = 0.3
     assert handover_fraction(slide, face) is None
+
+
+@pytest.fixture(scope="module")
+def place_camera_env():
+    env = gym.make("wpbench/PlaceIn-v0", obs_mode="camera", assets="procedural", split="val", executor="panda")
+    yield env
+    env.close()
+
+
+def test_side_entry_out_of_reach_is_relayed(place_camera_env):
+    # Episode 6: a block on the floor far from a roofed cavity; no single base reaches both the
+    # side pick and the goal, so the arm sets the block down in front of the opening first.
+    r = step_with(place_camera_env, 6, lambda T: T)
+    assert r["success"], (r["failure_reason"], r["failure_detail"])
+    assert r["entry"] == "side" and len(r["relay_point"]) == 3 and r["relay_base"] != r["arm_base"]
+    r = step_with(place_camera_env, 6, lambda T: np.eye(4))
+    assert not r["success"]
+
+
+def test_relay_spots_stand_clear_in_front():
+    from types import SimpleNamespace
+
+    from wpbench.sim.panda_executor import RELAY_MARGIN, relay_poses
+
+    rng = np.random.default_rng(0)
+    # A cabinet (x < 0) with its opening facing +x; a 10 cm block on the floor 1.2 m away.
+    cabinet = rng.uniform([-0.6, -0.4, 0.0], [0.0, 0.4, 0.8], size=(3000, 3))
+    block = rng.uniform([1.0, 1.0, 0.0], [1.1, 1.1, 0.1], size=(500, 3))
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("z", 0.7).as_matrix()
+    T[:3, 3] = np.array([-0.3, 0.0, 0.2]) - T[:3, :3] @ np.array([1.05, 1.05, 0.0])
+    poses = relay_poses(block, cabinet, T, SimpleNamespace(direction=np.array([1.0, 0.0, 0.0]), staging_distance=0.3))
+    assert poses
+    for M in poses:
+        moved = block @ M[:3, :3].T + M[:3, 3]
+        assert np.allclose(M[:3, :3], T[:3, :3]) and abs(M[2, 3]) < 1e-9      # turned as the goal, on the floor
+        assert moved[:, 0].min() > 0.0                                          # in front of the opening
+        centre = (moved[:, :2].min(0) + moved[:, :2].max(0)) / 2
+        assert np.min(np.linalg.norm(cabinet[:, :2] - centre, axis=1)) > RELAY_MARGIN
