@@ -11,14 +11,18 @@ POLICY      ?= wp
 TASK        ?= open-then-place
 SPLIT       ?= val
 EPISODES    ?= 20
+# The executor `wpbench run` uses when none is named (wpbench.names.DEFAULT_EXECUTOR), read
+# when a recipe needs it, after setup has made the venv.
+EXECUTOR    ?= $(shell $(PYTHON) -c 'from wpbench.names import DEFAULT_EXECUTOR; print(DEFAULT_EXECUTOR)')
 RUN_ARGS    ?=
 # `make run` writes to its own folder (git-ignored), so it really runs its episodes even
 # though the published runs under results/runs/ are committed; rerunning it resumes. The
-# folder is named after the shipped weights too: after new weights arrive (git pull), the
+# folder is named after the executor (a run is never resumed with another one) and after
+# the shipped weights: after new weights arrive (git pull), the
 # next `make run` starts a new run instead of refusing to resume the old one, which stays
 # (`=`, not `:=`: the weights are hashed only by the targets that use RUN_OUT).
 WEIGHTS_ID   = $(shell cat policies/weights/best.json policies/weights/*/model.pt 2>/dev/null | sha256sum | cut -c1-8)
-RUN_OUT     ?= runs/$(POLICY)__$(TASK)__$(SPLIT)__weights-$(WEIGHTS_ID)
+RUN_OUT     ?= runs/$(POLICY)__$(TASK)__$(SPLIT)__$(EXECUTOR)__weights-$(WEIGHTS_ID)
 RESULTS     ?= results
 PYTEST_ARGS ?=
 
@@ -38,7 +42,7 @@ setup:
 
 run: setup
 	$(WPBENCH) run --policy $(POLICY) --task $(TASK) --split $(SPLIT) --episodes $(EPISODES) \
-		--out $(RUN_OUT) --resume $(RUN_ARGS)
+		--executor $(EXECUTOR) --out $(RUN_OUT) --resume $(RUN_ARGS)
 
 # pytest exits with 5 when it collected no tests: that is a failure here too.
 test: setup

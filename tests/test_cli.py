@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 import wpbench.cli as cli
 from wpbench.cli.choices import check_choice, choice_callback
 from wpbench.evaluation.summary import summarize, write_summary
+from wpbench.names import DEFAULT_EXECUTOR
 
 
 def run_wpbench(exe: Path, *args: str, cwd: Path | None = None, timeout: float = 120):
@@ -122,6 +123,18 @@ def test_make_test_treats_no_collected_tests_as_failure(repo_root):
     )
     assert result.returncode != 0
     assert "collected no tests" in result.stderr
+
+
+def test_make_run_names_its_folder_after_the_executor(repo_root):
+    """`make run` resumes its own folder: one per executor, so a new default never resumes an old run."""
+    result = subprocess.run(["make", "--no-print-directory", "-n", "run"], capture_output=True, text=True,
+                            timeout=120, cwd=repo_root, stdin=subprocess.DEVNULL)
+    assert result.returncode == 0, result.stderr
+    assert f"--executor {DEFAULT_EXECUTOR} --out runs/wp__open-then-place__val__{DEFAULT_EXECUTOR}__weights-" \
+        in result.stdout
+    other = subprocess.run(["make", "--no-print-directory", "-n", "run", "EXECUTOR=ideal"], capture_output=True,
+                           text=True, timeout=120, cwd=repo_root, stdin=subprocess.DEVNULL)
+    assert "--executor ideal --out runs/wp__open-then-place__val__ideal__weights-" in other.stdout
 
 
 # --- in-process: wiring of lazily imported commands ---------------------------
@@ -236,7 +249,11 @@ def test_run_writes_results_resumes_and_never_overwrites(wpbench_exe, tmp_path):
     lines = (out / "episodes.jsonl").read_text().splitlines()
     assert [json.loads(line)["episode"] for line in lines] == [0, 1]
     assert all(json.loads(line)["success"] for line in lines)
-    assert json.loads((out / "summary.json").read_text())["success_rate"] == 1.0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["success_rate"] == 1.0
+    # No --executor: the default one carries out the pose, and the table says which it was.
+    assert summary["meta"]["executor"] == DEFAULT_EXECUTOR != "ideal"
+    assert any(line.split() == ["executor", DEFAULT_EXECUTOR] for line in first.stdout.splitlines())
 
     refused = run_wpbench(wpbench_exe, *common, "--episodes", "3", timeout=600)
     assert refused.returncode != 0 and "--resume" in (refused.stderr + refused.stdout)

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from wpbench.evaluation.sweep import sweep_configs
+from wpbench.names import DEFAULT_EXECUTOR
 
 
 def test_every_combination_gets_its_own_resumable_folder(tmp_path):
@@ -30,4 +31,6 @@ def test_a_sweep_with_two_workers_writes_the_leaderboard_and_resumes(wpbench_exe
     assert "`gt`" in board and "`identity`" in board and "100.0%" in board
     again = subprocess.run(args, capture_output=True, text=True, timeout=900)  # all done: resumes, runs nothing
     assert again.returncode == 0, again.stderr
-    assert len((tmp_path / "runs" / "gt__open-door__val__procedural__mesh" / "episodes.jsonl").read_text().splitlines()) == 2
+    # No --executors: the default executor's runs, in folders named after it.
+    run = tmp_path / "runs" / f"gt__open-door__val__procedural__mesh__{DEFAULT_EXECUTOR}"
+    assert len((run / "episodes.jsonl").read_text().splitlines()) == 2

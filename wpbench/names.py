@@ -33,6 +33,10 @@ OBS_MODES = ("camera", "mesh")
 
 # How a predicted cross-pose is carried out in the simulator.
 EXECUTORS = ("ideal", "gripper", "panda")
+# The executor of `wpbench run` and `wpbench sweep` when none is named: the most realistic one
+# that meets the benchmark's capability and speed bars (docs/executors.md). The task envs and
+# RunConfig keep "ideal", the teleport protocol, as their own default.
+DEFAULT_EXECUTOR = "gripper"
 
 # Policy groups. The registry (wpbench.policies.registry) maps each name to its class.
 TRAINABLE_POLICIES = ("gf", "tp", "wp-og", "wp-postsvd", "wp-postsvd-t")

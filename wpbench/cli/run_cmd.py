@@ -52,8 +52,8 @@ def run(
     shard: str = typer.Option(
         None, metavar="I/N", help="Run only the episodes whose index is I modulo N (job arrays), into a folder of "
                                   "its own; join the shards with `wpbench merge`."),
-    executor: str = typer.Option("ideal", help=f"How a predicted cross-pose is carried out: "
-                                               f"{', '.join(names.EXECUTORS)}."),
+    executor: str = typer.Option(names.DEFAULT_EXECUTOR, help=f"How a predicted cross-pose is carried out: "
+                                                              f"{', '.join(names.EXECUTORS)} (docs/executors.md)."),
     weights_root: Path = typer.Option(
         None, help="Load trained policies from this folder instead of policies/weights (an experiment's "
                    "weights); the run then goes to <weights-root>/runs/ unless --out says otherwise."),

@@ -13,7 +13,7 @@ from wpbench.cli.choices import check_choice, split_names
 def sweep(
     policies: str = typer.Option(..., help="Policies, comma- or space-separated."),
     tasks: str = typer.Option(",".join(names.BUILTIN_TASKS), help="Tasks."),
-    executors: str = typer.Option("ideal", help=f"Executors ({', '.join(names.EXECUTORS)})."),
+    executors: str = typer.Option(names.DEFAULT_EXECUTOR, help=f"Executors ({', '.join(names.EXECUTORS)})."),
     assets: str = typer.Option("procedural", help="Asset sources: 'procedural' and/or PartNet-Mobility folders."),
     splits: str = typer.Option("val", help=f"Furniture splits ({', '.join(names.RUN_SPLITS)})."),
     episodes: int = typer.Option(50, min=1, help="Episodes per run."),

@@ -331,6 +331,8 @@ def format_summary_table(summary: Mapping[str, Any]) -> str:
         ("task", str(summary.get("task"))),
         ("split", str(summary.get("split"))),
         ("asset source", str(summary.get("asset_source"))),
+        ("observation", str((summary.get("meta") or {}).get("obs"))),
+        ("executor", str((summary.get("meta") or {}).get("executor") or "ideal")),
         ("episodes", str(summary.get("episodes"))),
         ("success rate [95% CI]", _rate_with_ci(summary.get("success_rate"), summary.get("success_ci95"))),
     ]
@@ -346,6 +348,10 @@ def format_summary_table(summary: Mapping[str, Any]) -> str:
     ]
     if summary.get("nan_failures"):
         rows.append(("successes voided by NaN errors", str(summary["nan_failures"])))
+    reasons = summary.get("failure_reasons") or {}
+    if reasons:
+        ordered = sorted(reasons.items(), key=lambda item: (-item[1], item[0]))
+        rows.append(("failure reasons", ", ".join(f"{reason} {count}" for reason, count in ordered)))
     text = tabulate(rows, tablefmt="simple", disable_numparse=True)
 
     per_category = summary.get("per_category") or {}
