@@ -43,7 +43,7 @@ from wpbench.sim.failure import (BLOW_UP, COLLISION, GRASP_MISSED, PLANNING_FAIL
                                  UNREACHABLE)
 from wpbench.sim.grasp_choice import Grasp, articulated_grasp, carry_height, suction_point, top_grasp, top_suction_point
 from wpbench.sim.gripper import FINGER_OPEN
-from wpbench.sim.gripper_executor import (BLOCKED_OPENING, CARRY_CLEARANCE, CLOSE_SECONDS, HELD_OPENING, HOLD_SECONDS,
+from wpbench.sim.gripper_executor import (BLOCKED_OPENING, CARRY_CLEARANCE, CLOSE_SECONDS, CUP_REACH, GUARD_SPEED, GUARD_START, HELD_OPENING, HOLD_SECONDS,
                                           LIFT_HEIGHT, PREGRASP_DISTANCE, REGRASP_LIFT, RELEASE_SECONDS,
                                           RETREAT_DISTANCE, STALL_ANGLE, STALL_DISTANCE, SUCTION_PRESS, SUCTION_SLIP,
                                           _below_floor, _pose_distance, _segment_seconds, _smooth)
@@ -79,6 +79,7 @@ RELAY_LEADS = (0.05, 0.2, 0.35)          # m, a relay spot lies this much furthe
 RELAY_OFFSETS = (0.0, 0.3, -0.3, 0.5, -0.5)   # m ... and this far to the side of the goal
 RELAY_MARGIN = 0.08          # m, no anchor point this close to the relayed object's footprint (the hand from above)
 MAX_RELAYS = 4               # relay spots planned at most
+RELAY_PRESS = 0.02           # m, the cup on a relayed object presses this much further
 
 
 @dataclass
@@ -114,6 +115,7 @@ class Path:
     seconds: float
     sampled: np.ndarray
     check_stall: bool = True
+    guarded: bool = False        # stops where the cup first touches something that can move
 
     @property
     def samples(self) -> int:
@@ -163,14 +165,24 @@ def _screw(cross_pose: np.ndarray, grip: np.ndarray, start: float = 0.0, end: fl
     return Path(lambda u: interpolate(cross_pose, start + u * (end - start)) @ grip, seconds, sampled)
 
 
-def _approach(grasp: Grasp, suction: bool, obstacles: np.ndarray, press: float = SUCTION_PRESS) -> list:
-    """Move to the pre-grasp pose, come in along the approach (a cup ``press`` past the surface), grasp."""
+def _approach(grasp: Grasp, suction: bool, obstacles: np.ndarray, press: float = SUCTION_PRESS,
+              slow: bool = False) -> list:
+    """Move to the pre-grasp pose, come in along the approach (a cup ``press`` past the surface;
+    with ``slow``, the last GUARD_START before the surface and the press at GUARD_SPEED, so a
+    free object is pushed gently rather than knocked away), grasp."""
     pre = grasp.tcp.copy()
     pre[:3, 3] -= PREGRASP_DISTANCE * grasp.approach
     contact = grasp.tcp.copy()
     if suction:
         contact[:3, 3] += press * grasp.approach
-    return [Move(pre, obstacles), _line(pre, contact, check_stall=False), GraspStep(grasp)]
+    if not slow:
+        return [Move(pre, obstacles), _line(pre, contact, check_stall=False), GraspStep(grasp)]
+    near = grasp.tcp.copy()
+    near[:3, 3] -= GUARD_START * grasp.approach
+    creep = _line(near, contact, check_stall=False)
+    creep.seconds = max(creep.seconds, float(np.linalg.norm(contact[:3, 3] - near[:3, 3])) / GUARD_SPEED)
+    creep.guarded = True
+    return [Move(pre, obstacles), _line(pre, near, check_stall=False), creep, GraspStep(grasp)]
 
 
 def _retreat(at: np.ndarray, approach: np.ndarray, retreat_to: np.ndarray | float | None = None) -> list:
@@ -193,6 +205,7 @@ class Segment:
     seconds: float
     poses: Callable[[float], np.ndarray] | None = None
     check_stall: bool = True
+    guarded: bool = False
 
 
 @dataclass
@@ -292,7 +305,7 @@ def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.nda
         start = 0
         for s in script[k + 1:j]:
             if isinstance(s, Path):
-                plan.steps.append(Segment(chain[start:start + s.samples], s.seconds, s.poses, s.check_stall))
+                plan.steps.append(Segment(chain[start:start + s.samples], s.seconds, s.poses, s.check_stall, s.guarded))
                 start += s.samples
             else:
                 plan.steps.append(s)
@@ -382,6 +395,9 @@ class _Runner:
             speed = (q_at(_smooth(min(1.0, (k + 1) / n))) - target) / self.s.timestep
             arm.set_joint_targets(target, speed)
             self.tick()
+            if seg.guarded and self._cup_touches():
+                arm.set_joint_targets(arm.qpos())
+                return
             if self.holding and self._slipped():
                 touching = self.s.held_touches_furniture
                 if touching is not None and touching():
@@ -400,6 +416,13 @@ class _Runner:
                     raise _Abort(COLLISION, f"the arm was stopped on its way ({np.degrees(lag):.0f} deg behind)"
                                  + self._touching())
         arm.set_joint_targets(seg.q[-1])
+
+    def _cup_touches(self) -> bool:
+        """The cup touches something that can move (not the static ground)."""
+        from sapien import physx
+
+        body = self.s.arm.touched_body(self.s.ms_scene.px.get_contacts(), near=CUP_REACH)
+        return body is not None and not isinstance(body, physx.PhysxRigidStaticComponent)
 
     def _touching(self) -> str:
         touching = self.s.arm.contacts_with_others(self.s.ms_scene.px.get_contacts())
@@ -607,14 +630,14 @@ def _turn_script(object_points: np.ndarray, anchor: np.ndarray, turn: float, rol
     turned[:3, :3] = Rotation.from_rotvec([0.0, 0.0, turn]).as_matrix() @ lifted[:3, :3]
     down = turned.copy()
     down[2, 3] = top.tcp[2, 3]
-    return [*_approach(top, True, np.concatenate([anchor, object_points])),
+    return [*_approach(top, True, np.concatenate([anchor, object_points]), slow=True),
             _line(top.tcp, lifted), _line(lifted, turned), _line(turned, down), *_retreat(down, top.approach)]
 
 
 def _side_scripts(plan, object_points: np.ndarray, anchor_points: np.ndarray,
-                  press: float = SUCTION_PRESS) -> tuple[list[list], dict]:
-    """The side-entry plan as scripts (one per TCP roll; the cup ``press`` past the face), and
-    what the stage result records of it."""
+                  press: float = SUCTION_PRESS, slow: bool = False) -> tuple[list[list], dict]:
+    """The side-entry plan as scripts (one per TCP roll; the cup ``press`` past the face, slowly
+    with ``slow``), and what the stage result records of it."""
     from wpbench.sim.side_entry import _turn_about_vertical, regrasp_centre
 
     waypoints = plan.carry_waypoints()
@@ -630,7 +653,7 @@ def _side_scripts(plan, object_points: np.ndarray, anchor_points: np.ndarray,
         script = _turn_script(object_points, anchor_points, plan.regrasp_turn, roll) if plan.regrasp_turn else []
         pick = Grasp(_rolled(plan.pick, roll), plan.pick[:3, 2].copy(), 0.0)
         way = [_rolled(w, roll) for w in waypoints]
-        script += _approach(pick, True, np.concatenate([anchor_points, points_now]), press)
+        script += _approach(pick, True, np.concatenate([anchor_points, points_now]), press, slow)
         script += [_line(a, b) for a, b in zip(way[:-1], way[1:])]
         script += _retreat(way[-1], plan.goal[:3, 2], plan.retreat())
         scripts.append(script)
@@ -666,7 +689,7 @@ def _top_scripts(object_points: np.ndarray, anchor_points: np.ndarray, cross_pos
     for roll in rolls:
         g = _rolled_grasp(grasp, roll)
         way = [_rolled(w, roll) for w in waypoints]
-        scripts.append([*_approach(g, suction, np.concatenate([anchor_points, object_points])),
+        scripts.append([*_approach(g, suction, np.concatenate([anchor_points, object_points]), slow=suction),
                         *[_line(a, b) for a, b in zip(way[:-1], way[1:])], *_retreat(way[-1], g.approach)])
     return scripts, rolls, extra, ""
 
@@ -705,57 +728,73 @@ def relay_poses(object_points: np.ndarray, anchor_points: np.ndarray, cross_pose
     return poses
 
 
-def _side_entry(scene: ArmScene, plan, object_points: np.ndarray, anchor_points: np.ndarray,
-                cross_pose: np.ndarray, viewpoint: np.ndarray | None, goal_change: dict) -> ExecutionResult:
-    """Side entry from where the object stands; when no base placement reaches both the pick and
-    the goal, a relay: the object is first carried from above and set down in front of the
-    opening (one base), then the side entry is made from there (another base: the robot's base
-    moves only while it holds nothing)."""
+def _entries(object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray,
+             viewpoint: np.ndarray | None, relayed: bool) -> list:
+    """The ways into a roofed cavity: [(plan, scripts, rolls, extra)] for the cup on the side face
+    that looks out at the goal (wpbench.sim.side_entry); empty when there is none."""
+    out = []
+    side = plan_side_entry(object_points, anchor_points, cross_pose, viewpoint)
+    if side is not None and not _below_floor(np.stack(side.carry_waypoints())):
+        # A relayed object stands where the arm set it down, give or take a centimetre: the cup
+        # presses further then.
+        press = SUCTION_PRESS + (RELAY_PRESS if relayed else 0.0)
+        scripts, extra = _side_scripts(side, object_points, anchor_points, press, slow=True)
+        out.append((side, scripts, SYMMETRIC_ROLLS, extra))
+    return out
+
+
+def _roofed_entry(scene: ArmScene, object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray,
+                  viewpoint: np.ndarray | None, goal_change: dict) -> ExecutionResult | None:
+    """Into a roofed cavity from where the object stands; when no base placement reaches both the
+    pick and the goal, a relay: the object is first carried from above and set down in front of
+    the opening (one base), then put in from there (another base: the robot's base moves only
+    while it holds nothing). None when no way in is found before planning."""
     goal_points = _moved(object_points, cross_pose)
-    scripts, extra = _side_scripts(plan, object_points, anchor_points)
+    entries = _entries(object_points, anchor_points, cross_pose, viewpoint, relayed=False)
+    if not entries:
+        return None
+    extra = dict(entries[0][3])
     extra.update(goal_change)
-    if _below_floor(np.stack(plan.carry_waypoints())):
-        return _finish(None, ExecutionResult(ok=False, reason=UNREACHABLE, detail="the path goes under the floor"), extra)
+    failed = None
     obstacles = np.concatenate([anchor_points, object_points, goal_points])
-    direct, failed = _plan(scene, scripts, anchor_points, obstacles, plan.pick[:3, 3], extra)
-    if direct is not None:
-        return _carry_out(scene, direct, SYMMETRIC_ROLLS, extra, COLLISION)
+    for plan, scripts, rolls, info in entries:
+        direct, why = _plan(scene, scripts, anchor_points, obstacles, plan.pick[:3, 3], extra)
+        failed = failed or why
+        if direct is not None:
+            info.update(goal_change)
+            info["placements_tried"] = extra["placements_tried"]
+            return _carry_out(scene, direct, rolls, info, COLLISION)
     suction = scene.grasp_mode == "suction"
-    for M in relay_poses(object_points, anchor_points, cross_pose, plan)[:MAX_RELAYS]:
+    for M in relay_poses(object_points, anchor_points, cross_pose, entries[0][0])[:MAX_RELAYS]:
         relayed = _moved(object_points, M)
         then = cross_pose @ np.linalg.inv(M)
-        side = plan_side_entry(relayed, anchor_points, then, viewpoint)
-        if side is None:
-            continue
-        scripts2, extra2 = _side_scripts(side, relayed, anchor_points)
-        if _below_floor(np.stack(side.carry_waypoints())):
-            continue
-        second, _ = _plan(scene, scripts2, anchor_points, np.concatenate([anchor_points, relayed, goal_points]),
-                          side.pick[:3, 3], extra)
-        if second is None:
-            continue
-        scripts1, rolls1, extra1, _ = _top_scripts(object_points, anchor_points, M, suction)
-        if scripts1 is None:
-            continue
-        first, _ = _plan(scene, scripts1, anchor_points, np.concatenate([anchor_points, object_points, relayed]),
-                         extra1["grasp_point"], extra)
-        if first is None:
-            continue
-        tried = extra["placements_tried"]
-        relay = _carry_out(scene, first, rolls1, extra1, COLLISION)
-        extra2.update(goal_change)
-        centre = (relayed.min(0) + relayed.max(0)) / 2
-        extra2.update({"placements_tried": tried, "relay_point": centre.round(4).tolist(),
-                       "relay_turn_deg": float(np.degrees(np.arctan2(M[1, 0], M[0, 0]))),
-                       "relay_base": extra1.get("arm_base"), "relay_grasp_point": extra1.get("grasp_point")})
-        if relay.reason or not relay.ok:
-            relay.details.update({k: v for k, v in extra2.items() if k.startswith("relay") or k in goal_change})
-            relay.details["placements_tried"] = tried
-            relay.detail = f"while setting the object down in front of the opening: {relay.detail}"
-            return relay
-        result = _carry_out(scene, second, SYMMETRIC_ROLLS, extra2, COLLISION)
-        result.sim_seconds += relay.sim_seconds
-        return result
+        for plan, scripts2, rolls2, extra2 in _entries(relayed, anchor_points, then, viewpoint, relayed=True):
+            second, _ = _plan(scene, scripts2, anchor_points, np.concatenate([anchor_points, relayed, goal_points]),
+                              plan.pick[:3, 3], extra)
+            if second is None:
+                continue
+            scripts1, rolls1, extra1, _ = _top_scripts(object_points, anchor_points, M, suction)
+            if scripts1 is None:
+                break
+            first, _ = _plan(scene, scripts1, anchor_points, np.concatenate([anchor_points, object_points, relayed]),
+                             extra1["grasp_point"], extra)
+            if first is None:
+                break
+            tried = extra["placements_tried"]
+            relay = _carry_out(scene, first, rolls1, extra1, COLLISION)
+            centre = (relayed.min(0) + relayed.max(0)) / 2
+            extra2.update(goal_change)
+            extra2.update({"placements_tried": tried, "relay_point": centre.round(4).tolist(),
+                           "relay_turn_deg": float(np.degrees(np.arctan2(M[1, 0], M[0, 0]))),
+                           "relay_base": extra1.get("arm_base"), "relay_grasp_point": extra1.get("grasp_point")})
+            if relay.reason or not relay.ok:
+                relay.details.update({k: v for k, v in extra2.items() if k.startswith("relay") or k in goal_change})
+                relay.details["placements_tried"] = tried
+                relay.detail = f"while setting the object down in front of the opening: {relay.detail}"
+                return relay
+            result = _carry_out(scene, second, rolls2, extra2, COLLISION)
+            result.sim_seconds += relay.sim_seconds
+            return result
     return _finish(None, failed, extra)
 
 
@@ -771,9 +810,9 @@ def execute_free_panda(scene: ArmScene, object_points: np.ndarray, anchor_points
     cross_pose = rest_on_support(object_points, anchor_points, upright)
     goal_change["goal_raised_m"] = round(float(cross_pose[2, 3] - upright[2, 3]), 4)
     if suction and is_roofed(object_points, anchor_points, cross_pose):
-        plan = plan_side_entry(object_points, anchor_points, cross_pose, viewpoint)
-        if plan is not None:
-            return _side_entry(scene, plan, object_points, anchor_points, cross_pose, viewpoint, goal_change)
+        result = _roofed_entry(scene, object_points, anchor_points, cross_pose, viewpoint, goal_change)
+        if result is not None:
+            return result
     goal_points = _moved(object_points, cross_pose)
     obstacles = np.concatenate([anchor_points, object_points, goal_points])
     scripts, rolls, extra, why = _top_scripts(object_points, anchor_points, cross_pose, suction)
