@@ -26,11 +26,14 @@ def door_env():
     env.close()
 
 
-@pytest.fixture(scope="module")
-def place_env():
-    env = gym.make("wpbench/PlaceIn-v0", obs_mode="mesh", assets="procedural", split="val", executor="panda")
+def _panda_place_in(obs_mode: str):
+    """PlaceIn on val furniture under the panda executor, closed when the module's tests are done."""
+    env = gym.make("wpbench/PlaceIn-v0", obs_mode=obs_mode, assets="procedural", split="val", executor="panda")
     yield env
     env.close()
+
+
+place_env = pytest.fixture(scope="module", name="place_env")(lambda: (yield from _panda_place_in("mesh")))
 
 
 def _far_up(T):
@@ -138,11 +141,8 @@ def test_push_only_where_the_wrist_would_meet_the_floor():
     assert handover_fraction(slide, face) is None
 
 
-@pytest.fixture(scope="module")
-def place_camera_env():
-    env = gym.make("wpbench/PlaceIn-v0", obs_mode="camera", assets="procedural", split="val", executor="panda")
-    yield env
-    env.close()
+place_camera_env = pytest.fixture(scope="module", name="place_camera_env")(
+    lambda: (yield from _panda_place_in("camera")))
 
 
 def test_side_entry_out_of_reach_is_relayed(place_camera_env):
