@@ -347,7 +347,7 @@ def test_run_weights_root_loads_the_experiment_and_writes_beside_it(runner, capt
     result = runner.invoke(cli.app, ["run", "--policy", "gf", "--task", "open-door", "--weights-root", str(root)])
     assert result.exit_code == 2 and "stopped by the test" in result.output
     (cfg,) = captured_runs
-    assert cfg.out == root / "runs" / "gf__open-door__val__procedural__camera"
+    assert cfg.out == root / "runs" / f"gf__open-door__val__procedural__camera__{DEFAULT_EXECUTOR}"
     assert make_policy(cfg.policy, **cfg.policy_kwargs).config.weights_dir == root / "gf"
 
     refused = runner.invoke(cli.app, ["run", "--policy", "gt", "--weights-root", str(root)])
