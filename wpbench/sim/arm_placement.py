@@ -17,6 +17,14 @@ The rule (docs/executors.md, ``panda``):
 - After those come the candidates that stand in front of the anchor's tall part only (its
   points at least BASE_HEIGHT high), with the same obstacle test: beside a part that lies
   low in front of the furniture (an open oven or dishwasher door), not on it.
+- Then the points of a GRID_STEP grid within GRID_EXTENT of the middle that pass the same
+  obstacle test and stand BASE_RADIUS outside the footprint (convex hull) of the anchor's
+  tall part (beside the furniture, not only in front of it), nearest reach first (the farthest wrist of the path
+  from the shoulder; see below), at most MAX_GRID of them.
+- Every candidate must reach the path: for each TCP pose, the wrist (WRIST_BACK behind the
+  TCP along its approach) lies within MAX_WRIST_REACH of the shoulder (SHOULDER_HEIGHT above
+  the base) and at least MIN_WRIST_RADIUS from the base's vertical axis horizontally. This
+  only drops placements the arm's links cannot span; the planner decides the rest.
 
 The executor takes the first candidate from which the planner reaches every pose of the path.
 """
@@ -29,6 +37,13 @@ ANGLES_DEG = (0.0, 25.0, -25.0, 50.0, -50.0, 75.0, -75.0)
 RADII = (0.55, 0.7, 0.4, 0.85)          # m, base to the middle of the path
 BASE_RADIUS = 0.2                        # m, clear of obstacles around the base (link0 and the shoulder's sweep)
 BASE_HEIGHT = 0.45                       # m, up to the shoulder
+SHOULDER_HEIGHT = 0.333                  # m, the Panda's joint 2 above its base
+WRIST_BACK = 0.21                        # m, TCP to the wrist (joint 6) along the approach
+MAX_WRIST_REACH = 0.8                    # m, shoulder to wrist at most (upper arm 0.33 + forearm 0.39 + offsets)
+MIN_WRIST_RADIUS = 0.15                  # m, a wrist closer to the base's axis would be inside link 0-1
+GRID_STEP = 0.1                          # m
+GRID_EXTENT = 1.0                        # m
+MAX_GRID = 8
 
 
 def _check(points: np.ndarray, name: str) -> np.ndarray:
@@ -59,24 +74,72 @@ def base_pose(position_xy: np.ndarray, facing_xy: np.ndarray) -> np.ndarray:
     return T
 
 
+def wrist_reach(base_xy: np.ndarray, tcps: np.ndarray) -> tuple[float, float]:
+    """(the farthest wrist from the shoulder, the nearest wrist to the base's axis horizontally),
+    in m, over the TCP poses ``tcps`` (K, 4, 4) for a base standing at ``base_xy`` (2,)."""
+    wrist = tcps[:, :3, 3] - WRIST_BACK * tcps[:, :3, 2]
+    d = wrist - np.array([base_xy[0], base_xy[1], SHOULDER_HEIGHT])
+    return float(np.linalg.norm(d, axis=1).max()), float(np.linalg.norm(d[:, :2], axis=1).min())
+
+
+def _reaches(base_xy: np.ndarray, tcps: np.ndarray) -> bool:
+    far, near = wrist_reach(base_xy, tcps)
+    return far <= MAX_WRIST_REACH and near >= MIN_WRIST_RADIUS
+
+
+def _free(xy: np.ndarray, low: np.ndarray, centre: np.ndarray, front: np.ndarray, front_edge: float) -> bool:
+    if (xy - centre) @ front < front_edge + BASE_RADIUS:
+        return False
+    return not (len(low) and np.min(np.linalg.norm(low - xy, axis=1)) < BASE_RADIUS)
+
+
+def _hull_test(points: np.ndarray):
+    """A test ``inside(xy (M, 2)) -> (M,) bool`` for the convex hull of the points' footprint,
+    or None when they span no area."""
+    from scipy.spatial import Delaunay, QhullError
+
+    xy = np.unique(np.round(points[:, :2], 3), axis=0)
+    if len(xy) < 3:
+        return None
+    try:
+        tri = Delaunay(xy)
+    except QhullError:
+        return None
+    return lambda q: tri.find_simplex(q) >= 0
+
+
 def _candidates(anchor: np.ndarray, obstacles: np.ndarray, tcps: np.ndarray, grasp_point: np.ndarray,
-                front_from: np.ndarray) -> list[np.ndarray]:
+                front_from: np.ndarray, grid: bool = False) -> list[np.ndarray]:
     front = front_direction(anchor, grasp_point)[:2]
     centre = (anchor[:, :2].min(0) + anchor[:, :2].max(0)) / 2
     front_edge = float(((front_from[:, :2] - centre) @ front).max()) if len(front_from) else -np.inf
     middle = tcps[:, :2, 3].mean(0)
     low = obstacles[obstacles[:, 2] < BASE_HEIGHT, :2]
     out = []
+    if grid:
+        g = np.arange(-GRID_EXTENT, GRID_EXTENT + 1e-9, GRID_STEP)
+        xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+        xy = xy[np.linalg.norm(xy, axis=1) <= GRID_EXTENT] + middle
+        inside = _hull_test(front_from)
+        ring = BASE_RADIUS * np.array([[np.cos(a), np.sin(a)] for a in np.linspace(0, 2 * np.pi, 8, endpoint=False)])
+        scored = []
+        for p in xy:
+            far, near = wrist_reach(p, tcps)
+            if far > MAX_WRIST_REACH or near < MIN_WRIST_RADIUS:
+                continue
+            if len(low) and np.min(np.linalg.norm(low - p, axis=1)) < BASE_RADIUS:
+                continue
+            if inside is not None and inside(np.vstack([p, p + ring])).any():
+                continue
+            scored.append((far, tuple(p)))
+        return [base_pose(np.array(p), middle) for _, p in sorted(scored)[:MAX_GRID]]
     for angle in np.radians(ANGLES_DEG):
         c, s = np.cos(angle), np.sin(angle)
         direction = np.array([c * front[0] - s * front[1], s * front[0] + c * front[1]])
         for radius in RADII:
             xy = middle + radius * direction
-            if (xy - centre) @ front < front_edge + BASE_RADIUS:
-                continue
-            if len(low) and np.min(np.linalg.norm(low - xy, axis=1)) < BASE_RADIUS:
-                continue
-            out.append(base_pose(xy, middle))
+            if _free(xy, low, centre, front, front_edge) and _reaches(xy, tcps):
+                out.append(base_pose(xy, middle))
     return out
 
 
@@ -91,4 +154,6 @@ def base_candidates(anchor_points: np.ndarray, obstacle_points: np.ndarray, path
     tall = anchor[anchor[:, 2] >= BASE_HEIGHT]
     beside = [b for b in _candidates(anchor, obstacles, tcps, grasp_point, tall)
               if not any(np.allclose(b, a) for a in strict)]
-    return strict + beside
+    grid = [b for b in _candidates(anchor, obstacles, tcps, grasp_point, tall, grid=True)
+            if not any(np.allclose(b[:2, 3], a[:2, 3], atol=0.05) for a in strict + beside)]
+    return strict + beside + grid

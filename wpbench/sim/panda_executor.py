@@ -328,7 +328,7 @@ def plan_script(planner: ArmPlanner, scripts: list[list], anchor: np.ndarray, ob
             tcps.extend([s.sampled[0], s.sampled[-1]])
     candidates = base_candidates(anchor, obstacles, np.stack(tcps), grasp_point)
     if not candidates:
-        return None, UNREACHABLE, "no free floor in front of the furniture for the arm's base", 0
+        return None, UNREACHABLE, "no free floor in front of or beside the furniture within the arm's reach of the path", 0
     reasons = []
     retry = []
     for n, base in enumerate(candidates, start=1):
