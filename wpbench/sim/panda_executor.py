@@ -78,7 +78,15 @@ TOP_SUCTION_ROLLS = (0.0, np.pi, np.pi / 2, -np.pi / 2)
 RELAY_LEADS = (0.05, 0.2, 0.35)          # m, a relay spot lies this much further out than the slide needs ...
 RELAY_OFFSETS = (0.0, 0.3, -0.3, 0.5, -0.5)   # m ... and this far to the side of the goal
 RELAY_MARGIN = 0.08          # m, no anchor point this close to the relayed object's footprint (the hand from above)
+REST_TURNS = (0.0, np.pi / 2, -np.pi / 2, 2.6, -2.6)   # rad, joint 1 of the rest pose, tried in turn
 MAX_RELAYS = 4               # relay spots planned at most
+LEDGE_LEADS = (0.1, 0.14, 0.18, 0.22)   # m, a spot on a surface in front of the opening lies this much further out than the slide needs
+MAX_LEDGE_RELAYS = 2         # such spots planned at most
+MIN_SUPPORT_POINTS = 4       # observed anchor points under the footprint at least ...
+MIN_SUPPORT_HEIGHT = 0.03    # m ... none lower (the floor is not observed; this is furniture) ...
+SUPPORT_FLAT = 0.015         # m ... within this of the highest ...
+SUPPORT_SPAN = 0.6           # ... spanning this share of the footprint along and across the opening
+SUPPORT_GAP = 0.002          # m, set down this far above the highest of them
 RELAY_PRESS = 0.02           # m, the cup on a relayed object presses this much further
 
 
@@ -213,6 +221,7 @@ class Plan:
     base: np.ndarray
     steps: list = field(default_factory=list)     # Segment | GraspStep | ReleaseStep | FreeJointStep
     script_index: int = 0
+    start: np.ndarray = field(default_factory=lambda: HOME_QPOS.copy())   # the rest pose the arm starts from
 
 
 class _NoPlan(Exception):
@@ -258,6 +267,15 @@ def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.nda
     anchor = np.concatenate([anchor, floor])
     plan = Plan(base)
     q = HOME_QPOS.copy()
+    if isinstance(script[0], Move):
+        # The rest pose turned about the base's vertical axis, the first that touches nothing observed.
+        planner.set_cloud(np.concatenate([script[0].obstacles, floor]), MOVE_CLEARANCE)
+        for turn in REST_TURNS:
+            start = HOME_QPOS.copy()
+            start[0] = turn
+            if not planner.collisions(start, ARM_LINKS + HAND_LINKS):
+                q = plan.start = start
+                break
     k = 0
     while k < len(script):
         step = script[k]
@@ -497,7 +515,7 @@ def _carry_out(scene: ArmScene, plan: Plan, rolls: tuple[float, ...], extra: dic
     extra["arm_base_yaw_deg"] = float(np.degrees(np.arctan2(plan.base[1, 0], plan.base[0, 0])))
     arm = scene.arm
     opening = 0.0 if scene.grasp_mode == "suction" else 2 * FINGER_OPEN
-    arm.place(plan.base, HOME_QPOS, opening)
+    arm.place(plan.base, plan.start, opening)
     run = _Runner(scene, stall_reason)
     try:
         for step in plan.steps:
@@ -728,6 +746,62 @@ def relay_poses(object_points: np.ndarray, anchor_points: np.ndarray, cross_pose
     return poses
 
 
+def ledge_relay_poses(object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray,
+                      side) -> list[np.ndarray]:
+    """Relay spots on an observed flat surface straight in front of the opening (an oven's or a
+    dishwasher's open door lying in front of its cavity): motions (4, 4) of the object, turned as
+    the goal turns it, further out than the slide needs by LEDGE_LEADS, kept where the observed
+    anchor points under the object's footprint within SUPPORT_FLAT of the highest of them (at
+    least MIN_SUPPORT_POINTS, none lower than MIN_SUPPORT_HEIGHT) span SUPPORT_SPAN of the
+    footprint in both horizontal directions and no anchor point stands above them within
+    RELAY_MARGIN of the footprint. The object is set down SUPPORT_GAP
+    above the highest of them. Pure numpy."""
+    from scipy.spatial import Delaunay, QhullError
+
+    obj = np.asarray(object_points, dtype=np.float64)
+    anchor = np.asarray(anchor_points, dtype=np.float64)
+    T = np.asarray(cross_pose, dtype=np.float64)
+    centre = np.array([*(obj[:, :2].min(0) + obj[:, :2].max(0)) / 2, obj[:, 2].min()])
+    yaw = float(np.arctan2(T[1, 0], T[0, 0]))
+    R = np.eye(4)
+    R[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+    turned = _moved(obj - centre, R)[:, :2]
+    ring = RELAY_MARGIN * np.array([[np.cos(a), np.sin(a)] for a in np.linspace(0, 2 * np.pi, 8, endpoint=False)])
+    grown = (turned[:, None, :] + ring[None]).reshape(-1, 2)
+    try:
+        inside_foot, inside_grown = Delaunay(turned), Delaunay(grown)
+    except QhullError:
+        return []
+    goal_points = _moved(obj, T)
+    goal_centre = (goal_points[:, :2].min(0) + goal_points[:, :2].max(0)) / 2
+    out = np.asarray(side.direction, dtype=np.float64)[:2]
+    reach = side.staging_distance
+    poses = []
+    for lead in LEDGE_LEADS:
+        xy = goal_centre + (reach + lead) * out
+        local = anchor[:, :2] - xy
+        near = inside_grown.find_simplex(local) >= 0
+        under = near & (inside_foot.find_simplex(local) >= 0)
+        if not under.any():
+            continue
+        # The surface is the top layer under the footprint (a door's underside may be observed too);
+        # it must span most of the footprint in both directions.
+        top = under & (anchor[:, 2] >= anchor[under, 2].max() - SUPPORT_FLAT)
+        z = anchor[top, 2]
+        if top.sum() < MIN_SUPPORT_POINTS or z.min() < MIN_SUPPORT_HEIGHT:
+            continue
+        axes = np.stack([out, [-out[1], out[0]]])
+        if np.any(np.ptp(local[top] @ axes.T, axis=0) < SUPPORT_SPAN * np.ptp(turned @ axes.T, axis=0)):
+            continue
+        if np.any(anchor[near, 2] > z.max() + SUPPORT_FLAT):
+            continue
+        M = R.copy()
+        M[:2, 3] = xy - R[:2, :2] @ centre[:2]
+        M[2, 3] = z.max() + SUPPORT_GAP - centre[2]
+        poses.append(M)
+    return poses
+
+
 def _entries(object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray,
              viewpoint: np.ndarray | None, relayed: bool) -> list:
     """The ways into a roofed cavity: [(plan, scripts, rolls, extra)] for the cup on the side face
@@ -765,20 +839,28 @@ def _roofed_entry(scene: ArmScene, object_points: np.ndarray, anchor_points: np.
             info["placements_tried"] = extra["placements_tried"]
             return _carry_out(scene, direct, rolls, info, COLLISION)
     suction = scene.grasp_mode == "suction"
-    for M in relay_poses(object_points, anchor_points, cross_pose, entries[0][0])[:MAX_RELAYS]:
+    tries = []
+    # Spots on the furniture's own flat surface in front of the opening first (short to slide in
+    # from, the side pick higher above the floor), then on the floor.
+    spots = (ledge_relay_poses(object_points, anchor_points, cross_pose, entries[0][0])[:MAX_LEDGE_RELAYS]
+             + relay_poses(object_points, anchor_points, cross_pose, entries[0][0])[:MAX_RELAYS])
+    for M in spots:
         relayed = _moved(object_points, M)
         then = cross_pose @ np.linalg.inv(M)
         for plan, scripts2, rolls2, extra2 in _entries(relayed, anchor_points, then, viewpoint, relayed=True):
-            second, _ = _plan(scene, scripts2, anchor_points, np.concatenate([anchor_points, relayed, goal_points]),
-                              plan.pick[:3, 3], extra)
+            second, why2 = _plan(scene, scripts2, anchor_points, np.concatenate([anchor_points, relayed, goal_points]),
+                                 plan.pick[:3, 3], extra)
             if second is None:
+                tries.append(f"into the cavity: {why2.reason}: {why2.detail}")
                 continue
-            scripts1, rolls1, extra1, _ = _top_scripts(object_points, anchor_points, M, suction)
+            scripts1, rolls1, extra1, why1 = _top_scripts(object_points, anchor_points, M, suction)
             if scripts1 is None:
+                tries.append(f"setting down: {why1}")
                 break
-            first, _ = _plan(scene, scripts1, anchor_points, np.concatenate([anchor_points, object_points, relayed]),
-                             extra1["grasp_point"], extra)
+            first, why1 = _plan(scene, scripts1, anchor_points, np.concatenate([anchor_points, object_points, relayed]),
+                                extra1["grasp_point"], extra)
             if first is None:
+                tries.append(f"setting down: {why1.reason}: {why1.detail}")
                 break
             tried = extra["placements_tried"]
             relay = _carry_out(scene, first, rolls1, extra1, COLLISION)
@@ -795,6 +877,8 @@ def _roofed_entry(scene: ArmScene, object_points: np.ndarray, anchor_points: np.
             result = _carry_out(scene, second, rolls2, extra2, COLLISION)
             result.sim_seconds += relay.sim_seconds
             return result
+    extra["relay_spots"] = len(spots)
+    extra["relay_failures"] = tries
     return _finish(None, failed, extra)
 
 
