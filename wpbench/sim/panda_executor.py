@@ -87,6 +87,7 @@ MIN_SUPPORT_HEIGHT = 0.03    # m ... none lower (the floor is not observed; this
 SUPPORT_FLAT = 0.015         # m ... within this of the highest ...
 SUPPORT_SPAN = 0.6           # ... spanning this share of the footprint along and across the opening
 SUPPORT_GAP = 0.002          # m, set down this far above the highest of them
+RELEASE_DROP = 0.06          # m, an object slid into a cavity may be let go at most this high above its goal
 RELAY_PRESS = 0.02           # m, the cup on a relayed object presses this much further
 
 
@@ -124,6 +125,7 @@ class Path:
     sampled: np.ndarray
     check_stall: bool = True
     guarded: bool = False        # stops where the cup first touches something that can move
+    release_early: float = 0.0   # m, the arm may stop this far short of the end and let go there
 
     @property
     def samples(self) -> int:
@@ -300,11 +302,18 @@ def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.nda
             return None, UNREACHABLE, "no collision-free IK solution for the pre-grasp pose"
         planner.set_cloud(anchor, ARM_CLEARANCE)
         chain = why = None
+        furthest = None
         for goal in sorted(goals, key=lambda g: float(np.abs(g - q).max()))[:MAX_CHAIN_STARTS]:
             chain, why = planner.chain(tcps, goal, ARM_LINKS)
             if chain is not None:
                 break
+            if furthest is None or why.get("index", 0) > furthest.get("index", 0):
+                furthest = why
         if chain is None:
+            shorter = _let_go_earlier(script, k + 1, j, furthest.get("index", 0))
+            if shorter is not None:
+                return _plan_at(planner, base, shorter, anchor[:len(anchor) - len(floor)], allow_rrt)
+            why = furthest
             reason = PLANNING_FAILED if why.get("why") == "collision" else UNREACHABLE
             links = f": {', '.join(why['links'])}" if why.get("links") else ""
             return None, reason, (f"the arm cannot follow the path ({why.get('why')}{links} at pose "
@@ -330,6 +339,38 @@ def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.nda
         q = chain[-1]
         k = j
     return plan, "", ""
+
+
+def _let_go_earlier(script: list, first: int, end: int, failed_at: int) -> list | None:
+    """``script`` with the piece among ``script[first:end]`` in which the chain failed at pose
+    ``failed_at`` cut at the pose before, when that piece may end early (``release_early``) by
+    what is left of it, and the retreat after the release that follows it starting where the
+    cut piece now ends; None when it may not."""
+    start = 0
+    for n in range(first, end):
+        piece = script[n]
+        if not isinstance(piece, Path):
+            continue
+        if start <= failed_at < start + piece.samples:
+            last = failed_at - start - 1
+            if piece.release_early <= 0 or last < 0:
+                return None
+            end_pose = piece.sampled[last]
+            if np.linalg.norm(piece.sampled[-1][:3, 3] - end_pose[:3, 3]) > piece.release_early:
+                return None
+            out = list(script)
+            if last >= 1:
+                out[n] = _line(piece.sampled[0], end_pose, piece.check_stall)
+            else:
+                out[n] = None
+            for m in range(n + 1, end):
+                if isinstance(out[m], Path):
+                    if isinstance(out[m - 1], ReleaseStep):
+                        out[m] = _line(end_pose, out[m].sampled[-1], check_stall=False)
+                    break
+            return [x for x in out if x is not None]
+        start += piece.samples
+    return None
 
 
 def plan_script(planner: ArmPlanner, scripts: list[list], anchor: np.ndarray, obstacles: np.ndarray,
@@ -673,6 +714,9 @@ def _side_scripts(plan, object_points: np.ndarray, anchor_points: np.ndarray,
         way = [_rolled(w, roll) for w in waypoints]
         script += _approach(pick, True, np.concatenate([anchor_points, points_now]), press, slow)
         script += [_line(a, b) for a, b in zip(way[:-1], way[1:])]
+        # The last piece lowers the object onto its goal after the slide (into a cavity whose floor
+        # lies below its sill): where the wrist, still over the sill, stops it, the object is let go higher.
+        script[-1].release_early = RELEASE_DROP
         script += _retreat(way[-1], plan.goal[:3, 2], plan.retreat())
         scripts.append(script)
     return scripts, extra
