@@ -72,6 +72,7 @@ SYMMETRIC_ROLLS = (0.0, np.pi)
 MAX_GRASP_HEIGHT = 0.9       # m, a door is grasped no higher than this (the arm stands on the floor) ...
 MIN_GRASP_HEIGHT = 0.5       # ... and then no lower than this ...
 MIN_LOW_POINTS = 20          # ... when it shows at least this many points in between
+HINGE_REACH = 0.45           # m, a door no placement reaches along its whole arc is grasped this near its hinge
 PUSH_RETREAT = 0.12          # m, the hand backs off this far from a door it pulled before it pushes
 PUSH_DOOR_LAG = 0.08         # rad, the move to a push keeps clear of the door up to this far behind its plan
 TOP_SUCTION_ROLLS = (0.0, np.pi, np.pi / 2, -np.pi / 2)
@@ -622,12 +623,37 @@ def execute_articulated_panda(scene: ArmScene, action_points: np.ndarray, anchor
     if grasp.tcp[2, 3] > MAX_GRASP_HEIGHT and len(low) >= MIN_LOW_POINTS:
         # A tall door: the same choice among the door points a floor-standing arm reaches well.
         grasp = choose(low, cross_pose) or grasp
+    plan, failed, extra = _door_plan(scene, grasp, action_points, anchor_points, cross_pose, suction)
+    screw = screw_of(cross_pose)
+    if suction and plan is None and failed.reason == UNREACHABLE and screw.angle >= np.radians(10.0):
+        # No placement reaches the whole arc: the same choice among the door points nearer the hinge
+        # (a shorter arc; the door is pushed with more force at the cup).
+        near = action_points[np.linalg.norm(np.cross(action_points - screw.point, screw.axis), axis=1) <= HINGE_REACH]
+        nz = near[:, 2]
+        if grasp.tcp[2, 3] > MAX_GRASP_HEIGHT and np.sum((nz >= MIN_GRASP_HEIGHT) & (nz <= MAX_GRASP_HEIGHT)) >= MIN_LOW_POINTS:
+            near = near[(nz >= MIN_GRASP_HEIGHT) & (nz <= MAX_GRASP_HEIGHT)]
+        closer = choose(near, cross_pose) if len(near) >= MIN_LOW_POINTS else None
+        if closer is not None:
+            plan2, failed2, extra2 = _door_plan(scene, closer, action_points, anchor_points, cross_pose, suction)
+            extra2["placements_tried"] = extra2.get("placements_tried", 0) + extra.get("placements_tried", 0)
+            extra2["grasp_near_hinge"] = True
+            if plan2 is not None or failed2.reason != UNREACHABLE:
+                plan, failed, extra = plan2, failed2, extra2
+    if plan is None:
+        return _finish(None, failed, extra)
+    return _carry_out(scene, plan, SYMMETRIC_ROLLS, extra, STALLED_AGAINST_HINGE, free_joint, hold_joint)
+
+
+def _door_plan(scene: ArmScene, grasp: Grasp, action_points: np.ndarray, anchor_points: np.ndarray,
+               cross_pose: np.ndarray, suction: bool) -> tuple[Plan | None, ExecutionResult | None, dict]:
+    """The door's scripts for ``grasp`` (pull along the screw, or pull then push), planned:
+    (plan or None, the failure or None, what the result records)."""
     extra = {"grasp_point": grasp.tcp[:3, 3].round(4).tolist(), "grasp_approach": grasp.approach.round(4).tolist(),
              "grasp_width": grasp.width}
     path = interpolate(cross_pose, np.linspace(0, 1, 11)) @ grasp.tcp
     extra["planned_path"] = path[:, :3, 3].round(4).tolist()
     if _below_floor(path):
-        return _finish(None, ExecutionResult(ok=False, reason=UNREACHABLE, detail="the path goes under the floor"), extra)
+        return None, ExecutionResult(ok=False, reason=UNREACHABLE, detail="the path goes under the floor"), extra
     scene_points = np.concatenate([anchor_points, action_points])
     # A face the wrist cannot follow to the end (a bottom-hinged door): let go and push the rest.
     handover = handover_fraction(cross_pose, grasp.tcp) if suction else None
@@ -658,8 +684,10 @@ def execute_articulated_panda(scene: ArmScene, action_points: np.ndarray, anchor
                         push, *_retreat(end, end[:3, 2])])
     # The base keeps clear of the door's predicted sweep too.
     swept = np.concatenate([_moved(action_points, T) for T in interpolate(cross_pose, np.linspace(0, 1, 7))])
-    return _run(scene, scripts, SYMMETRIC_ROLLS, anchor_points, np.concatenate([anchor_points, swept]),
-                grasp.tcp[:3, 3], extra, STALLED_AGAINST_HINGE, free_joint, hold_joint)
+    plan, failed = _plan(scene, scripts, anchor_points, np.concatenate([anchor_points, swept]), grasp.tcp[:3, 3], extra)
+    return plan, failed, extra
+
+
 
 
 def _densified(points: np.ndarray, neighbours: int = 6) -> np.ndarray:
