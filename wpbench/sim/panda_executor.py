@@ -83,11 +83,13 @@ REST_TURNS = (0.0, np.pi / 2, -np.pi / 2, 2.6, -2.6)   # rad, joint 1 of the res
 MAX_RELAYS = 4               # relay spots planned at most
 LEDGE_LEADS = (0.1, 0.14, 0.18, 0.22)   # m, a spot on a surface in front of the opening lies this much further out than the slide needs
 MAX_LEDGE_RELAYS = 2         # such spots planned at most
-MIN_SUPPORT_POINTS = 4       # observed anchor points under the footprint at least ...
+MIN_SUPPORT_POINTS = 3       # observed anchor points under the footprint at least ...
 MIN_SUPPORT_HEIGHT = 0.03    # m ... none lower (the floor is not observed; this is furniture) ...
 SUPPORT_FLAT = 0.015         # m ... within this of the highest ...
-SUPPORT_SPAN = 0.6           # ... spanning this share of the footprint along and across the opening
+SUPPORT_SPAN = 0.9           # ... spanning this share of the footprint along and across the opening
+SUPPORT_REACH = 0.35         # m, around a relayed object its support is the hand's floor this far
 SUPPORT_GAP = 0.002          # m, set down this far above the highest of them
+MIN_CUP_RAISE = 0.01         # m, a cup raised less than this up the face is not tried separately
 RELEASE_DROP = 0.06          # m, an object slid into a cavity may be let go at most this high above its goal
 RELAY_PRESS = 0.02           # m, the cup on a relayed object presses this much further
 
@@ -824,9 +826,9 @@ def ledge_relay_poses(object_points: np.ndarray, anchor_points: np.ndarray, cros
     dishwasher's open door lying in front of its cavity): motions (4, 4) of the object, turned as
     the goal turns it, further out than the slide needs by LEDGE_LEADS, kept where the observed
     anchor points under the object's footprint within SUPPORT_FLAT of the highest of them (at
-    least MIN_SUPPORT_POINTS, none lower than MIN_SUPPORT_HEIGHT) span SUPPORT_SPAN of the
-    footprint in both horizontal directions and no anchor point stands above them within
-    RELAY_MARGIN of the footprint. The object is set down SUPPORT_GAP
+    least MIN_SUPPORT_POINTS, none lower than MIN_SUPPORT_HEIGHT), together with those at that
+    height within RELAY_MARGIN of the footprint, span SUPPORT_SPAN of the footprint in both
+    horizontal directions (those under it half as much), and no anchor point stands above them within RELAY_MARGIN of the footprint. The object is set down SUPPORT_GAP
     above the highest of them. Pure numpy."""
     from scipy.spatial import Delaunay, QhullError
 
@@ -858,12 +860,16 @@ def ledge_relay_poses(object_points: np.ndarray, anchor_points: np.ndarray, cros
             continue
         # The surface is the top layer under the footprint (a door's underside may be observed too);
         # it must span most of the footprint in both directions.
-        top = under & (anchor[:, 2] >= anchor[under, 2].max() - SUPPORT_FLAT)
+        level = anchor[:, 2] >= anchor[under, 2].max() - SUPPORT_FLAT
+        top = under & level
         z = anchor[top, 2]
         if top.sum() < MIN_SUPPORT_POINTS or z.min() < MIN_SUPPORT_HEIGHT:
             continue
+        # The surface at that height spans the footprint (a sparse cloud: counted out to RELAY_MARGIN around it).
         axes = np.stack([out, [-out[1], out[0]]])
-        if np.any(np.ptp(local[top] @ axes.T, axis=0) < SUPPORT_SPAN * np.ptp(turned @ axes.T, axis=0)):
+        if np.any(np.ptp(local[near & level] @ axes.T, axis=0) < SUPPORT_SPAN * np.ptp(turned @ axes.T, axis=0)):
+            continue
+        if np.any(np.ptp(local[top] @ axes.T, axis=0) < SUPPORT_SPAN / 2 * np.ptp(turned @ axes.T, axis=0)):
             continue
         if np.any(anchor[near, 2] > z.max() + SUPPORT_FLAT):
             continue
@@ -872,6 +878,22 @@ def ledge_relay_poses(object_points: np.ndarray, anchor_points: np.ndarray, cros
         M[2, 3] = z.max() + SUPPORT_GAP - centre[2]
         poses.append(M)
     return poses
+
+
+def _without_support(anchor_points: np.ndarray, object_points: np.ndarray) -> np.ndarray:
+    """The anchor cloud without the surface the object stands on: its points within SUPPORT_REACH
+    of the object's footprint (the hand comes in from beside it) no higher than SUPPORT_FLAT above
+    the object's bottom."""
+    from scipy.spatial import Delaunay, QhullError
+
+    ring = SUPPORT_REACH * np.array([[np.cos(a), np.sin(a)] for a in np.linspace(0, 2 * np.pi, 8, endpoint=False)])
+    grown = (object_points[:, None, :2] + ring[None]).reshape(-1, 2)
+    try:
+        inside = Delaunay(grown).find_simplex(anchor_points[:, :2]) >= 0
+    except QhullError:
+        return anchor_points
+    keep = ~(inside & (anchor_points[:, 2] <= object_points[:, 2].min() + SUPPORT_FLAT))
+    return anchor_points[keep] if keep.any() else anchor_points
 
 
 def _entries(object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray,
@@ -884,9 +906,42 @@ def _entries(object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: n
         # A relayed object stands where the arm set it down, give or take a centimetre: the cup
         # presses further then.
         press = SUCTION_PRESS + (RELAY_PRESS if relayed else 0.0)
-        scripts, extra = _side_scripts(side, object_points, anchor_points, press, slow=True)
-        out.append((side, scripts, SYMMETRIC_ROLLS, extra))
+        # The cup near the face's top edge first: the wrist, level with the cup, stays higher above
+        # the floor (or the surface) the object stands on.
+        for plan in (_raised_cup(side, object_points, anchor_points, cross_pose), side):
+            if plan is not None:
+                scripts, extra = _side_scripts(plan, object_points, anchor_points, press, slow=True)
+                extra["cup_raised_m"] = round(float(plan.goal[2, 3] - side.goal[2, 3]), 4)
+                out.append((plan, scripts, SYMMETRIC_ROLLS, extra))
     return out
+
+
+def _raised_cup(side, object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray):
+    """The side-entry plan with the cup moved up its face to CUP_EDGE below the object's top (the
+    goal upright, no turn before the pick), when the hand and the held object still clear the
+    observed anchor along the carry and the slide, and the hand still comes in clear at the pick
+    (the side-entry planner's own tests); None otherwise."""
+    from dataclasses import replace
+
+    from wpbench.sim.side_entry import (CUP_EDGE, _pick_reachable, hand_box, held_box, path_poses, poses_hit,
+                                        surface_clearance)
+
+    if side.regrasp_turn or side.goal[2, 0] < 0.99:
+        return None
+    goal_points = _moved(object_points, cross_pose)
+    rise = float(goal_points[:, 2].max()) - CUP_EDGE - float(side.goal[2, 3])
+    if rise < MIN_CUP_RAISE:
+        return None
+    goal = side.goal.copy()
+    goal[2, 3] += rise
+    plan = replace(side, pick=np.linalg.inv(cross_pose) @ goal, goal=goal)
+    clearance = surface_clearance(anchor_points)
+    boxes = [held_box(goal_points, goal), hand_box()]
+    if poses_hit(anchor_points, path_poses(plan.carry_waypoints()[1:-1]), boxes, clearance):
+        return None
+    if not _pick_reachable(anchor_points, plan.pick, float(object_points[:, 2].min()), clearance):
+        return None
+    return plan
 
 
 def _roofed_entry(scene: ArmScene, object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray,
@@ -919,7 +974,12 @@ def _roofed_entry(scene: ArmScene, object_points: np.ndarray, anchor_points: np.
     for M in spots:
         relayed = _moved(object_points, M)
         then = cross_pose @ np.linalg.inv(M)
-        for plan, scripts2, rolls2, extra2 in _entries(relayed, anchor_points, then, viewpoint, relayed=True):
+        # For the hand's path, the surface the object stands on is the side pick's floor (the palm keeps
+        # above it), not an obstacle; the arm's links keep clear of it.
+        around = _without_support(anchor_points, relayed)
+        found = False
+        for plan, scripts2, rolls2, extra2 in _entries(relayed, around, then, viewpoint, relayed=True):
+            found = True
             second, why2 = _plan(scene, scripts2, anchor_points, np.concatenate([anchor_points, relayed, goal_points]),
                                  plan.pick[:3, 3], extra)
             if second is None:
@@ -949,6 +1009,8 @@ def _roofed_entry(scene: ArmScene, object_points: np.ndarray, anchor_points: np.
             result = _carry_out(scene, second, rolls2, extra2, COLLISION)
             result.sim_seconds += relay.sim_seconds
             return result
+        if not found:
+            tries.append("into the cavity: no side entry from there")
     extra["relay_spots"] = len(spots)
     extra["relay_failures"] = tries
     return _finish(None, failed, extra)
