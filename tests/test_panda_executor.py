@@ -2,8 +2,10 @@
 the block, identity does not, a 30-degree rotated door fails, results repeat by seed, and a
 goal far out of the arm's reach is a failure with a reason, not a crash; a bottom-hinged
 door is pulled, then pushed open, and a rotated prediction for it still fails; a block whose
-side entry no single base reaches is relayed (camera episode). Plus the base placement rule,
-the relay spots and the pull-then-push rule on made-up boxes and doors."""
+side entry no single base reaches is relayed (camera episode). Plus the base placement rule
+(beside a door lying in front, within the arm's reach), the relay spots on the floor and on a
+flat surface in front of the opening, letting an object go higher where the arm stops
+lowering it, and the pull-then-push rule on made-up boxes and doors."""
 
 from __future__ import annotations
 
@@ -175,3 +177,78 @@ def test_relay_spots_stand_clear_in_front():
         assert moved[:, 0].min() > 0.0                                          # in front of the opening
         centre = (moved[:, :2].min(0) + moved[:, :2].max(0)) / 2
         assert np.min(np.linalg.norm(cabinet[:, :2] - centre, axis=1)) > RELAY_MARGIN
+
+
+def test_grid_bases_stand_beside_a_door_lying_in_front():
+    from wpbench.sim.arm_placement import MAX_WRIST_REACH, MIN_WRIST_RADIUS, wrist_reach
+
+    rng = np.random.default_rng(1)
+    # An oven (x < 0, 0.8 m tall) with its door open flat in front of it (x 0 to 0.6, 0.15 m up),
+    # and a TCP path into its cavity pointing along -x at 0.3 m height.
+    body = rng.uniform([-0.6, -0.3, 0.0], [0.0, 0.3, 0.8], size=(3000, 3))
+    door = np.column_stack([rng.uniform(0.0, 0.6, 800), rng.uniform(-0.3, 0.3, 800), np.full(800, 0.15)])
+    anchor = np.concatenate([body, door])
+    tcps = np.tile(np.eye(4), (3, 1, 1))
+    tcps[:, :3, :3] = [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]   # approach -x
+    tcps[:, :3, 3] = [[0.35, 0.0, 0.3], [0.2, 0.0, 0.3], [-0.1, 0.0, 0.3]]
+    candidates = base_candidates(anchor, anchor, tcps, tcps[0, :3, 3])
+    assert candidates
+    low = anchor[anchor[:, 2] < 0.45, :2]
+    for base in candidates:
+        far, near = wrist_reach(base[:2, 3], tcps)
+        assert far <= MAX_WRIST_REACH and near >= MIN_WRIST_RADIUS            # the arm spans the path
+        assert np.min(np.linalg.norm(low - base[:2, 3], axis=1)) >= BASE_RADIUS  # not on the door
+    # A path out of every placement's reach has none.
+    far_tcps = tcps.copy()
+    far_tcps[:, 0, 3] -= 2.0
+    far_tcps[:, 1, 3] += np.array([0.0, 1.5, -1.5])
+    assert not base_candidates(anchor, anchor, far_tcps, tcps[0, :3, 3])
+
+
+def test_ledge_relay_spots_lie_on_the_flat_surface_in_front():
+    from types import SimpleNamespace
+
+    from wpbench.sim.panda_executor import ledge_relay_poses
+
+    rng = np.random.default_rng(0)
+    # A cabinet (x < 0) with its opening facing +x, its door open flat in front at 0.15 m; a 12 cm
+    # block on the floor 1.2 m away, its goal inside the cavity.
+    cabinet = rng.uniform([-0.6, -0.4, 0.0], [0.0, 0.4, 0.8], size=(3000, 3))
+    door = np.column_stack([rng.uniform(0.0, 0.6, 1500), rng.uniform(-0.3, 0.3, 1500), np.full(1500, 0.15)])
+    block = rng.uniform([1.0, 1.0, 0.0], [1.12, 1.12, 0.12], size=(500, 3))
+    T = np.eye(4)
+    T[:3, 3] = np.array([-0.3, 0.0, 0.3]) - np.array([1.06, 1.06, 0.0])
+    side = SimpleNamespace(direction=np.array([1.0, 0.0, 0.0]), staging_distance=0.4)
+    poses = ledge_relay_poses(block, np.concatenate([cabinet, door]), T, side)
+    assert poses
+    for M in poses:
+        moved = block @ M[:3, :3].T + M[:3, 3]
+        assert abs(moved[:, 2].min() - 0.152) < 1e-6                 # on the door, just above it
+        assert 0.0 < moved[:, 0].min() and moved[:, 0].max() < 0.6    # in front of the opening, on the door
+    # Without the door there is no surface to set the block on.
+    assert ledge_relay_poses(block, cabinet, T, side) == []
+
+
+def test_an_object_let_go_higher_where_the_arm_stops_lowering():
+    from wpbench.sim.panda_executor import RELEASE_DROP, Move, ReleaseStep, _let_go_earlier, _line
+
+    def pose(z):
+        T = np.eye(4)
+        T[:3, 3] = [0.5, 0.0, z]
+        return T
+
+    slide, lower = _line(pose(0.4), pose(0.3)), _line(pose(0.3), pose(0.25))
+    lower.release_early = RELEASE_DROP
+    retreat = _line(pose(0.25), pose(0.35), check_stall=False)
+    script = [Move(pose(0.5), np.zeros((1, 3))), slide, lower, ReleaseStep(), retreat]
+    # The chain stopped 2 cm into the 5 cm lowering: let go there, back off from there.
+    failed_at = slide.samples + 2
+    cut = _let_go_earlier(script, 1, len(script), failed_at)
+    assert cut is not None and np.allclose(cut[2].sampled[-1], lower.sampled[1])
+    assert np.allclose(cut[4].sampled[0], lower.sampled[1]) and np.allclose(cut[4].sampled[-1], pose(0.35))
+    # Stopped in the slide: no.
+    assert _let_go_earlier(script, 1, len(script), 3) is None
+    # Stopped more than RELEASE_DROP above the goal: no.
+    long = _line(pose(0.3), pose(0.3 - RELEASE_DROP - 0.05))
+    long.release_early = RELEASE_DROP
+    assert _let_go_earlier([script[0], slide, long, ReleaseStep(), retreat], 1, 5, slide.samples + 1) is None
