@@ -157,6 +157,14 @@ def test_side_entry_out_of_reach_is_relayed(place_camera_env):
     assert not r["success"]
 
 
+def test_block_relayed_on_an_open_door_in_front(place_camera_env):
+    # Episode 7: a dishwasher, its door open flat in front of the cavity. The block is set down on
+    # the door in front of the opening, then held by its side face near the top and slid in.
+    r = step_with(place_camera_env, 7, lambda T: T)
+    assert r["success"], (r["failure_reason"], r["failure_detail"])
+    assert r["entry"] == "side" and r["relay_point"][2] > 0.1 and r["cup_raised_m"] > 0.0
+
+
 def test_relay_spots_stand_clear_in_front():
     from types import SimpleNamespace
 
