@@ -13,8 +13,9 @@ base frame (the client moves poses and clouds into it). mplib's own prints go to
 
 Requests (``op``): ``ik`` (CLIK with joint limits from given seeds), ``chain`` (IK along a
 sequence of TCP poses, each seeded with the last, refusing jumps, joint limits and
-collisions of the listed links with the point cloud), ``collide`` (which links of a
-configuration touch the cloud), ``line`` (a straight joint-space move, collision-checked
+collisions of the listed links with the point cloud; a pose whose solution touches the
+cloud is solved again from nudged seeds, a small collision-free change taken instead),
+``collide`` (which links of a configuration touch the cloud), ``line`` (a straight joint-space move, collision-checked
 at a fine step), ``rrt`` (RRTConnect with the point cloud), ``cloud`` (replace the point
 cloud), ``fk`` (TCP pose of a configuration), ``quit``.
 """
@@ -27,6 +28,14 @@ import struct
 import sys
 
 import numpy as np
+
+# A chain pose whose solution (seeded with the last pose's) touches the cloud is solved
+# again from seeds with one of these joints nudged by these amounts (rad); a solution
+# that touches nothing and changes no joint by more than ESCAPE_STEP (rad) from the last
+# pose's is taken instead.
+ESCAPE_JOINTS = (0, 2, 4, 6, 1, 3, 5)
+ESCAPE_NUDGES = (0.1, -0.1, 0.25, -0.25, 0.5, -0.5)
+ESCAPE_STEP = 0.2
 
 
 def _read(stream):
@@ -115,6 +124,25 @@ class Server:
                 out.append(q[self.arm].tolist())
         return {"solutions": out}
 
+    def _sidestep(self, pose, q_prev, links, pos_tol, ang_tol):
+        """A collision-free solution of ``pose`` near ``q_prev`` found from seeds with one
+        joint nudged (ESCAPE_NUDGES): the redundant arm turns its elbow away from what it
+        would touch; the smallest joint change within ESCAPE_STEP wins, None when none is."""
+        best, best_step = None, None
+        for j in ESCAPE_JOINTS:
+            for d in ESCAPE_NUDGES:
+                seed = q_prev.copy()
+                seed[self.arm[j]] += d
+                q = self._solve(pose, seed, pos_tol, ang_tol)
+                if q is None:
+                    continue
+                step = float(np.max(np.abs(q[self.arm] - q_prev[self.arm])))
+                if step > ESCAPE_STEP or (best_step is not None and step >= best_step):
+                    continue
+                if not self._hits(q, links):
+                    best, best_step = q, step
+        return best
+
     def chain(self, poses, seed, links=None, max_step=0.3, pos_tol=3e-3, ang_tol=3e-2):
         q_prev = self._full(seed)
         path = []
@@ -126,7 +154,9 @@ class Server:
                 return {"ok": False, "index": k, "why": "jump"}
             hits = self._hits(q, links)
             if hits:
-                return {"ok": False, "index": k, "why": "collision", "links": hits}
+                q = self._sidestep(pose, q_prev, links, pos_tol, ang_tol)
+                if q is None:
+                    return {"ok": False, "index": k, "why": "collision", "links": hits}
             path.append(q[self.arm].tolist())
             q_prev = q
         return {"ok": True, "path": path}
