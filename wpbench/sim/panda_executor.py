@@ -575,7 +575,11 @@ def _carry_out(scene: ArmScene, plan: Plan, rolls: tuple[float, ...], extra: dic
         arm.detach()
         arm.set_fingers(2 * FINGER_OPEN)
         if abort.reason != BLOW_UP:
-            run.wait(RELEASE_SECONDS)
+            try:
+                run.wait(RELEASE_SECONDS)
+            except _Abort as late:
+                # The scene blew up while the hand let go: that is the stage's failure.
+                abort = late
         arm.park()
         if hold_joint is not None:
             hold_joint()
