@@ -2,7 +2,8 @@
 the block, identity does not, a 30-degree rotated door fails, results repeat by seed, and a
 goal far out of the arm's reach is a failure with a reason, not a crash; a bottom-hinged
 door is pulled, then pushed open, and a rotated prediction for it still fails; a block whose
-side entry no single base reaches is relayed (camera episode). Plus the base placement rule
+side entry no single base reaches is relayed, and one is slid into a low deep cavity (camera
+episodes). Plus the base placement rule
 (beside a door lying in front, within the arm's reach), the relay spots on the floor and on a
 flat surface in front of the opening, letting an object go higher where the arm stops
 lowering it, and the pull-then-push rule on made-up boxes and doors."""
@@ -163,6 +164,15 @@ def test_block_relayed_on_an_open_door_in_front(place_camera_env):
     r = step_with(place_camera_env, 7, lambda T: T)
     assert r["success"], (r["failure_reason"], r["failure_detail"])
     assert r["entry"] == "side" and r["relay_point"][2] > 0.1 and r["cup_raised_m"] > 0.0
+
+
+def test_block_slid_into_a_low_deep_cavity_with_the_elbow_turned_away(place_camera_env):
+    # Episode 2: a dishwasher; along the slide into its low, deep cavity the forearm met the
+    # furniture from every base until the planner let a chain pose whose solution touches the
+    # observed cloud be solved again from nudged seeds (the elbow turning away).
+    r = step_with(place_camera_env, 2, lambda T: T)
+    assert r["success"], (r["failure_reason"], r["failure_detail"])
+    assert r["entry"] == "side"
 
 
 def test_relay_spots_stand_clear_in_front():
