@@ -36,6 +36,7 @@ import numpy as np
 ESCAPE_JOINTS = (0, 2, 4, 6, 1, 3, 5)
 ESCAPE_NUDGES = (0.1, -0.1, 0.25, -0.25, 0.5, -0.5)
 ESCAPE_STEP = 0.2
+ESCAPE_DRIFT = 0.01   # m, the TCP between the two poses keeps this close to the line joining them
 
 
 def _read(stream):
@@ -139,9 +140,20 @@ class Server:
                 step = float(np.max(np.abs(q[self.arm] - q_prev[self.arm])))
                 if step > ESCAPE_STEP or (best_step is not None and step >= best_step):
                     continue
-                if not self._hits(q, links):
+                if not self._hits(q, links) and self._between_ok(q_prev, q, pose, links):
                     best, best_step = q, step
         return best
+
+    def _between_ok(self, a, b, pose, links):
+        """The straight joint move from ``a`` to ``b`` (full) keeps its TCP within ESCAPE_DRIFT
+        of the straight line to ``pose`` and touches nothing."""
+        start = self._fk(a)[:3]
+        for u in (0.25, 0.5, 0.75):
+            q = (1 - u) * a + u * b
+            line = (1 - u) * start + u * np.asarray(pose[:3], dtype=np.float64)
+            if np.linalg.norm(self._fk(q)[:3] - line) > ESCAPE_DRIFT or self._hits(q, links):
+                return False
+        return True
 
     def chain(self, poses, seed, links=None, max_step=0.3, pos_tol=3e-3, ang_tol=3e-2):
         q_prev = self._full(seed)

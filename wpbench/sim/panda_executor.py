@@ -92,6 +92,10 @@ SUPPORT_GAP = 0.002          # m, set down this far above the highest of them
 MIN_CUP_RAISE = 0.01         # m, a cup raised less than this up the face is not tried separately
 RELEASE_DROP = 0.06          # m, an object slid into a cavity may be let go at most this high above its goal
 RELAY_PRESS = 0.02           # m, the cup on a relayed object presses this much further
+PIECE_JOINT_STEP = 0.04      # rad, a Cartesian piece's samples further apart in a joint than this get more time
+SHOULDER_RADIUS = 0.13       # m, a held object keeps out of this vertical cylinder about the base's axis ...
+SHOULDER_TOP = 0.45          # m ... up to this height (the arm's base and shoulder, links 0-2)
+HELD_SAMPLES = 64            # held object points checked against it
 
 
 @dataclass
@@ -138,6 +142,7 @@ class Path:
 @dataclass
 class GraspStep:
     grasp: Grasp
+    held: np.ndarray | None = None   # the observed object's points in the TCP frame at the grasp
 
 
 @dataclass
@@ -211,14 +216,16 @@ def _retreat(at: np.ndarray, approach: np.ndarray, retreat_to: np.ndarray | floa
 # ---------------------------------------------------------------------------- planning
 @dataclass
 class Segment:
-    """A planned motion: joint samples ``q`` (K, 7) at u = linspace(0, 1, K) over ``seconds``;
-    ``poses`` (Cartesian pieces) gives the TCP target at u for the stall check."""
+    """A planned motion: joint samples ``q`` (K, 7) at fractions ``grid`` (K,) of ``seconds``
+    (default linspace(0, 1, K)); ``poses`` (Cartesian pieces) gives the TCP target of sample
+    position s in [0, 1] (sample k at s = k / (K - 1)) for the stall check."""
 
     q: np.ndarray
     seconds: float
     poses: Callable[[float], np.ndarray] | None = None
     check_stall: bool = True
     guarded: bool = False
+    grid: np.ndarray | None = None
 
 
 @dataclass
@@ -267,6 +274,8 @@ def _move_timing(q: np.ndarray) -> tuple[np.ndarray, float]:
 def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.ndarray,
              allow_rrt: bool) -> tuple[Plan | None, str, str]:
     """The joint-space plan of ``script`` from ``base``; (None, reason, detail) when it fails."""
+    if _held_meets_shoulder(script, base):
+        return None, PLANNING_FAILED, "the held object would meet the arm's shoulder"
     planner.set_base(base)
     floor = floor_points(base)
     anchor = np.concatenate([anchor, floor])
@@ -335,13 +344,59 @@ def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.nda
         start = 0
         for s in script[k + 1:j]:
             if isinstance(s, Path):
-                plan.steps.append(Segment(chain[start:start + s.samples], s.seconds, s.poses, s.check_stall, s.guarded))
+                q_piece = chain[start:start + s.samples]
+                grid, stretch = _piece_timing(q_piece)
+                plan.steps.append(Segment(q_piece, s.seconds * stretch, s.poses, s.check_stall, s.guarded, grid))
                 start += s.samples
             else:
                 plan.steps.append(s)
         q = chain[-1]
         k = j
     return plan, "", ""
+
+
+def _piece_timing(q: np.ndarray) -> tuple[np.ndarray, float]:
+    """Joint path (K, 7) of a Cartesian piece -> (the fraction of its time at each sample, the
+    factor its time grows by): a step between samples that turns a joint more than
+    PIECE_JOINT_STEP (where the planner turned the elbow away) gets time in proportion, so
+    the joints move no faster there than along the rest of the piece."""
+    if len(q) < 2:
+        return np.linspace(0.0, 1.0, max(len(q), 2)), 1.0
+    steps = np.abs(np.diff(q, axis=0)).max(1)
+    weight = np.maximum(1.0, steps / PIECE_JOINT_STEP)
+    grid = np.concatenate([[0.0], np.cumsum(weight)]) / weight.sum()
+    return grid, float(weight.sum() / len(weight))
+
+
+def _holding(script: list, object_points: np.ndarray) -> list:
+    """``script`` with its grasps marked as holding ``object_points`` (the object's observed cloud
+    where it is when grasped)."""
+    pts = np.asarray(object_points, dtype=np.float64)
+    pts = pts[np.linspace(0, len(pts) - 1, min(len(pts), HELD_SAMPLES)).astype(int)]
+    for step in script:
+        if isinstance(step, GraspStep):
+            inv = np.linalg.inv(step.grasp.tcp)
+            step.held = pts @ inv[:3, :3].T + inv[:3, 3]
+    return script
+
+
+def _held_meets_shoulder(script: list, base: np.ndarray) -> bool:
+    """Whether an object held along ``script``'s Cartesian pieces comes into the cylinder of the
+    arm's base and shoulder (SHOULDER_RADIUS about the base's axis, up to SHOULDER_TOP), which the
+    planner's arm-against-cloud checks do not see."""
+    held = None
+    for step in script:
+        if isinstance(step, GraspStep):
+            held = step.held
+        elif isinstance(step, ReleaseStep):
+            held = None
+        elif isinstance(step, Path) and held is not None:
+            T = step.sampled
+            pts = np.einsum("kij,nj->kni", T[:, :3, :3], held) + T[:, None, :3, 3]
+            near = np.linalg.norm(pts[..., :2] - base[:2, 3], axis=-1) < SHOULDER_RADIUS
+            if np.any(near & (pts[..., 2] < SHOULDER_TOP)):
+                return True
+    return False
 
 
 def _let_go_earlier(script: list, first: int, end: int, failed_at: int) -> list | None:
@@ -446,7 +501,8 @@ class _Runner:
     def segment(self, seg: Segment) -> None:
         arm = self.s.arm
         n = max(1, int(round(seg.seconds / self.s.timestep)))
-        grid = np.linspace(0.0, 1.0, len(seg.q))
+        even = np.linspace(0.0, 1.0, len(seg.q))
+        grid = even if seg.grid is None or len(seg.grid) != len(seg.q) else seg.grid
 
         def q_at(u: float) -> np.ndarray:
             return np.array([np.interp(u, grid, seg.q[:, j]) for j in range(seg.q.shape[1])])
@@ -464,11 +520,11 @@ class _Runner:
                 touching = self.s.held_touches_furniture
                 if touching is not None and touching():
                     raise _Abort(COLLISION, "the furniture stopped the held object and pulled it off the cup")
-                raise _Abort(SLIPPED, "the object left the hand while moving")
+                raise _Abort(SLIPPED, "the object left the hand while moving" + self._touching())
             if not seg.check_stall:
                 continue
             if seg.poses is not None:
-                d, ang = _pose_distance(arm.tcp_pose(), seg.poses(u))
+                d, ang = _pose_distance(arm.tcp_pose(), seg.poses(float(np.interp(u, grid, even))))
                 if d > STALL_DISTANCE or ang > STALL_ANGLE:
                     raise _Abort(self.stall_reason, f"hand {d * 100:.1f} cm / {np.degrees(ang):.0f} deg behind its target"
                                  + self._touching())
@@ -744,9 +800,10 @@ def _side_scripts(plan, object_points: np.ndarray, anchor_points: np.ndarray,
     scripts = []
     for roll in SYMMETRIC_ROLLS:   # the palm box side entry checked is symmetric under these
         script = _turn_script(object_points, anchor_points, plan.regrasp_turn, roll) if plan.regrasp_turn else []
+        script = _holding(script, object_points)
         pick = Grasp(_rolled(plan.pick, roll), plan.pick[:3, 2].copy(), 0.0)
         way = [_rolled(w, roll) for w in waypoints]
-        script += _approach(pick, True, np.concatenate([anchor_points, points_now]), press, slow)
+        script += _holding(_approach(pick, True, np.concatenate([anchor_points, points_now]), press, slow), points_now)
         script += [_line(a, b) for a, b in zip(way[:-1], way[1:])]
         # The last piece lowers the object onto its goal after the slide (into a cavity whose floor
         # lies below its sill): where the wrist, still over the sill, stops it, the object is let go higher.
@@ -785,8 +842,9 @@ def _top_scripts(object_points: np.ndarray, anchor_points: np.ndarray, cross_pos
     for roll in rolls:
         g = _rolled_grasp(grasp, roll)
         way = [_rolled(w, roll) for w in waypoints]
-        scripts.append([*_approach(g, suction, np.concatenate([anchor_points, object_points]), slow=suction),
-                        *[_line(a, b) for a, b in zip(way[:-1], way[1:])], *_retreat(way[-1], g.approach)])
+        scripts.append(_holding([*_approach(g, suction, np.concatenate([anchor_points, object_points]), slow=suction),
+                                 *[_line(a, b) for a, b in zip(way[:-1], way[1:])], *_retreat(way[-1], g.approach)],
+                                object_points))
     return scripts, rolls, extra, ""
 
 
