@@ -6,7 +6,8 @@ side entry no single base reaches is relayed, and one is slid into a low deep ca
 episodes). Plus the base placement rule
 (beside a door lying in front, within the arm's reach), the relay spots on the floor and on a
 flat surface in front of the opening, letting an object go higher where the arm stops
-lowering it, and the pull-then-push rule on made-up boxes and doors."""
+lowering it, the pull-then-push rule on made-up boxes and doors, a held object kept off the
+arm's shoulder, and more time for a piece's big joint steps."""
 
 from __future__ import annotations
 
@@ -270,3 +271,41 @@ def test_an_object_let_go_higher_where_the_arm_stops_lowering():
     long = _line(pose(0.3), pose(0.3 - RELEASE_DROP - 0.05))
     long.release_early = RELEASE_DROP
     assert _let_go_earlier([script[0], slide, long, ReleaseStep(), retreat], 1, 5, slide.samples + 1) is None
+
+
+def test_a_held_object_keeps_off_the_arm_shoulder():
+    from wpbench.sim.grasp_choice import Grasp
+    from wpbench.sim.panda_executor import (SHOULDER_RADIUS, GraspStep, Move, ReleaseStep, _held_meets_shoulder,
+                                            _holding, _line)
+
+    def pose(x, y, z):
+        T = np.eye(4)
+        T[:3, :3] = np.diag([1.0, -1.0, -1.0])    # pointing down
+        T[:3, 3] = [x, y, z]
+        return T
+
+    # A 10 cm block held from above at 0.45 m (its bottom 10 cm lower), carried 0.6 m along y.
+    block = np.random.default_rng(0).uniform([-0.05, -0.05, 0.25], [0.05, 0.05, 0.35], size=(200, 3)) + [0.5, -0.3, 0.0]
+    pick = pose(0.5, -0.3, 0.35)
+    script = _holding([Move(pick, np.zeros((1, 3))), GraspStep(Grasp(pick, np.array([0.0, 0.0, -1.0]), 0.0)),
+                       _line(pick, pose(0.5, 0.3, 0.35)), ReleaseStep(), _line(pose(0.5, 0.3, 0.35), pose(0.0, 0.0, 0.35))],
+                      block)
+    base = np.eye(4)
+    assert not _held_meets_shoulder(script, base)          # the carry passes 0.5 m from the base's axis
+    base[0, 3] = 0.5 - SHOULDER_RADIUS + 0.02               # now it passes over the shoulder
+    assert _held_meets_shoulder(script, base)
+    base[0, 3] = 0.0                                        # the empty hand backs off over the base's axis
+    assert not _held_meets_shoulder(script, base)
+
+
+def test_big_joint_steps_of_a_piece_get_more_time():
+    from wpbench.sim.panda_executor import PIECE_JOINT_STEP, _piece_timing
+
+    q = np.zeros((11, 7))
+    q[:, 0] = np.linspace(0.0, 0.2, 11)                     # 0.02 rad a step ...
+    grid, stretch = _piece_timing(q)
+    assert stretch == 1.0 and np.allclose(grid, np.linspace(0, 1, 11))
+    q[6:, 2] += 4 * PIECE_JOINT_STEP                         # ... and one step four times the limit
+    grid, stretch = _piece_timing(q)
+    assert np.isclose(stretch, 13 / 10)
+    assert np.isclose(grid[6] - grid[5], 4 * (grid[5] - grid[4]))
