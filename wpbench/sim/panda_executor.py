@@ -96,6 +96,8 @@ PIECE_JOINT_STEP = 0.04      # rad, a Cartesian piece's samples further apart in
 SHOULDER_RADIUS = 0.13       # m, a held object keeps out of this vertical cylinder about the base's axis ...
 SHOULDER_TOP = 0.45          # m ... up to this height (the arm's base and shoulder, links 0-2)
 HELD_SAMPLES = 64            # held object points checked against it
+DOOR_CHECKS = 9              # poses along a door's screw where the arm is checked against the moved door ...
+DOOR_ARM_LINKS = tuple(f"panda_link{i}" for i in range(6))   # ... these links (the wrist and hand meet it by design)
 
 
 @dataclass
@@ -133,6 +135,8 @@ class Path:
     check_stall: bool = True
     guarded: bool = False        # stops where the cup first touches something that can move
     release_early: float = 0.0   # m, the arm may stop this far short of the end and let go there
+    # A door moved along the piece: its observed points (N, 3) and their motion (4, 4) at u.
+    carries: tuple[np.ndarray, Callable[[float], np.ndarray]] | None = None
 
     @property
     def samples(self) -> int:
@@ -181,6 +185,14 @@ def _screw(cross_pose: np.ndarray, grip: np.ndarray, start: float = 0.0, end: fl
     seconds = _segment_seconds(np.eye(4), interpolate(cross_pose, end - start), length)
     sampled = interpolate(cross_pose, np.linspace(start, end, samples)) @ grip
     return Path(lambda u: interpolate(cross_pose, start + u * (end - start)) @ grip, seconds, sampled)
+
+
+def _door_screw(cross_pose: np.ndarray, grip: np.ndarray, door_points: np.ndarray, start: float = 0.0,
+                end: float = 1.0) -> Path:
+    """:func:`_screw`, carrying the observed door along (for the arm's check against it)."""
+    piece = _screw(cross_pose, grip, start, end)
+    piece.carries = (door_points, lambda u: interpolate(cross_pose, start + u * (end - start)))
+    return piece
 
 
 def _approach(grasp: Grasp, suction: bool, obstacles: np.ndarray, press: float = SUCTION_PRESS,
@@ -318,7 +330,11 @@ def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.nda
         for goal in sorted(goals, key=lambda g: float(np.abs(g - q).max()))[:MAX_CHAIN_STARTS]:
             chain, why = planner.chain(tcps, goal, ARM_LINKS)
             if chain is not None:
-                break
+                hit = _arm_meets_door(planner, script[k + 1:j], chain)
+                if hit is None:
+                    break
+                chain, why = None, hit
+                planner.set_cloud(anchor, ARM_CLEARANCE)
             if furthest is None or why.get("index", 0) > furthest.get("index", 0):
                 furthest = why
         if chain is None:
@@ -397,6 +413,26 @@ def _held_meets_shoulder(script: list, base: np.ndarray) -> bool:
             if np.any(near & (pts[..., 2] < SHOULDER_TOP)):
                 return True
     return False
+
+
+def _arm_meets_door(planner: ArmPlanner, steps: list, chain: np.ndarray) -> dict | None:
+    """The first of DOOR_CHECKS poses along each door-moving piece of ``steps`` (joint path
+    ``chain``) where an arm link of DOOR_ARM_LINKS comes within ARM_CLEARANCE of the observed
+    door moved as the prediction moves it there (the planner's cloud is the anchor, which the
+    door is not), as the chain's failure; None when there is none. Leaves the door as the cloud."""
+    start = 0
+    for piece in steps:
+        if not isinstance(piece, Path):
+            continue
+        if piece.carries is not None:
+            points, motion = piece.carries
+            for idx in np.unique(np.linspace(0, piece.samples - 1, DOOR_CHECKS).round().astype(int)):
+                planner.set_cloud(_moved(points, motion(idx / max(piece.samples - 1, 1))), ARM_CLEARANCE)
+                hits = planner.collisions(chain[start + idx], DOOR_ARM_LINKS)
+                if hits:
+                    return {"ok": False, "why": "collision", "links": hits, "index": start + idx}
+        start += piece.samples
+    return None
 
 
 def _let_go_earlier(script: list, first: int, end: int, failed_at: int) -> list | None:
@@ -725,12 +761,12 @@ def _door_plan(scene: ArmScene, grasp: Grasp, action_points: np.ndarray, anchor_
     for roll in SYMMETRIC_ROLLS:
         g = _rolled_grasp(grasp, roll)
         if handover is None:
-            screw = _screw(cross_pose, g.tcp)
+            screw = _door_screw(cross_pose, g.tcp, action_points)
             scripts.append([*_approach(g, suction, scene_points), FreeJointStep(), screw,
                             *_retreat(screw.poses(1.0), g.approach)])
             continue
-        pull = _screw(cross_pose, g.tcp, 0.0, handover)
-        push = _screw(cross_pose, push_grip(g.tcp), handover, 1.0)
+        pull = _door_screw(cross_pose, g.tcp, action_points, 0.0, handover)
+        push = _door_screw(cross_pose, push_grip(g.tcp), action_points, handover, 1.0)
         start, end = push.poses(0.0), push.poses(1.0)
         before = start.copy()
         before[:3, 3] -= PREGRASP_DISTANCE * start[:3, 2]
