@@ -85,3 +85,29 @@ def test_runaway_simulation_is_a_failure_not_a_crash(place_env):
     result = simulate_until_still(base.advance_physics, 1 / 200, lambda: [np.asarray(base.free_body.linear_velocity)],
                                   lambda: False, max_seconds=0.2)
     assert not result.ok and result.reason == "blow_up" and "blow-up" in result.detail
+
+
+def test_ideal_door_swings_at_a_bounded_speed_and_arrives(door_env):
+    """The joint's target runs to the goal at IDEAL_JOINT_SPEED: no jolt through the whole range at once."""
+    from wpbench.tasks.base import SIM_FREQ
+    from wpbench.sim.executor import IDEAL_JOINT_SPEED, execute_articulated
+
+    door_env.reset(seed=1, options={"start_fraction": 0.0})
+    base = door_env.unwrapped
+    f = base.furniture
+    q_open = base.joint_fraction(1.0)
+    T = f.target_link_pose_at(np.array([q_open]))[0] @ np.linalg.inv(f.target_link_pose())
+    surface = sample_mesh_surface(f.world_mesh([f.target_link]), 512, np.random.default_rng(0))
+    q_start = f.qpos
+    speeds = []
+
+    def step():
+        base._physics_step()
+        speeds.append(abs(f.qvel))
+
+    result = execute_articulated(f, T, surface, step, 1.0 / SIM_FREQ)
+    assert result.ok and result.at_rest
+    assert abs(f.qpos - q_open) < 0.02
+    limit = IDEAL_JOINT_SPEED[f.asset.joint_type]
+    assert max(speeds) < 1.3 * limit, f"peak joint speed {max(speeds):.2f} for a target moving at {limit}"
+    assert result.sim_seconds >= abs(q_open - q_start) / limit

@@ -3,7 +3,8 @@ cross-pose differs between policies.
 
 - Articulated: pick the joint value whose target-link pose best matches the
   predicted cross-pose (least squares on the link's points, within the joint
-  limits), drive the joint there with a PD drive, simulate until still.
+  limits), move the joint's PD target there at a bounded speed (as a hand would
+  swing it), simulate until still.
 - Free-floating: move the object to the predicted pose, release it, simulate
   until it rests. Physics decides: a pose inside a wall is pushed out, and that
   counts.
@@ -32,6 +33,10 @@ BODY_STILL_LIN = 1e-2     # m/s
 BODY_STILL_ANG = 1e-1     # rad/s
 RUNAWAY_SPEED = 20.0      # m/s (or rad/s): nothing in these scenes moves that fast
 MAX_DEPENETRATION_SPEED = 0.5  # m/s: a pose inside a wall is pushed out gently, not launched
+# How fast the ideal executor moves a joint's target. A step of the target would swing a
+# door through its whole range at once: a 180-degree fridge door peaked above RUNAWAY_SPEED,
+# and the jolt set light parts (knobs) spinning.
+IDEAL_JOINT_SPEED = {"revolute": 1.5, "prismatic": 0.5}   # rad/s, m/s
 
 
 @dataclass
@@ -110,15 +115,28 @@ def execute_articulated(
     step: Callable[[], None],
     timestep: float,
 ) -> ExecutionResult:
-    """Drive the target joint to the value that best realises ``cross_pose``."""
+    """Move the target joint to the value that best realises ``cross_pose``: its PD target
+    runs there at IDEAL_JOINT_SPEED, then physics settles."""
     q_cmd = best_joint_value(furniture, cross_pose, link_points)
-    furniture.drive_to(q_cmd)
+    q_now = furniture.qpos
+    speed = IDEAL_JOINT_SPEED[furniture.asset.joint_type]
+    n_ramp = int(np.ceil(abs(q_cmd - q_now) / (speed * timestep)))
+    velocities = lambda: [furniture.articulation.get_qvel()]  # noqa: E731
+    for n in range(1, n_ramp + 1):
+        furniture.drive_to(q_now + (q_cmd - q_now) * n / n_ramp)
+        step()
+        detail = blown_up(velocities())
+        if detail:
+            result = ExecutionResult(ok=False, reason=BLOW_UP, detail=detail, sim_seconds=n * timestep)
+            result.details.update(q_command=q_cmd, q_final=furniture.qpos)
+            return result
     result = simulate_until_still(
         step,
         timestep,
-        velocities=lambda: [furniture.articulation.get_qvel()],
+        velocities=velocities,
         is_still=lambda: abs(furniture.qvel) < JOINT_STILL_VEL,
     )
+    result.sim_seconds += n_ramp * timestep
     result.details.update(q_command=q_cmd, q_final=furniture.qpos)
     return result
 
