@@ -7,7 +7,8 @@ episodes). Plus the base placement rule
 (beside a door lying in front, within the arm's reach), the relay spots on the floor and on a
 flat surface in front of the opening, letting an object go higher where the arm stops
 lowering it, the pull-then-push rule on made-up boxes and doors, a held object kept off the
-arm's shoulder, and more time for a piece's big joint steps."""
+arm's shoulder, more time for a piece's big joint steps, and the arm checked against the door
+moved along its screw."""
 
 from __future__ import annotations
 
@@ -309,3 +310,35 @@ def test_big_joint_steps_of_a_piece_get_more_time():
     grid, stretch = _piece_timing(q)
     assert np.isclose(stretch, 13 / 10)
     assert np.isclose(grid[6] - grid[5], 4 * (grid[5] - grid[4]))
+
+
+def test_the_arm_is_checked_against_the_door_moved_along_its_screw():
+    from wpbench.sim.panda_executor import DOOR_ARM_LINKS, Move, _arm_meets_door, _door_screw
+
+    # A door turning 90 deg about the vertical axis at the origin; the grip on its face at x = 0.5.
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("z", 90, degrees=True).as_matrix()
+    door = np.stack([np.linspace(0.1, 0.6, 20), np.zeros(20), np.full(20, 0.5)], axis=1)
+    grip = np.eye(4)
+    grip[:3, 3] = [0.5, 0.0, 0.5]
+    screw = _door_screw(T, grip, door)
+    chain = np.zeros((screw.samples, 7))
+    chain[:, 0] = np.arange(screw.samples)     # joint 1 tells the checked pose apart
+
+    class Planner:
+        """Says the arm touches the cloud when it holds a point at y > 0.3 (the door turned past ~40 deg)."""
+        def set_cloud(self, points, radius):
+            self.cloud = points
+
+        def collisions(self, q, links):
+            assert tuple(links) == DOOR_ARM_LINKS
+            return ["panda_link4"] if self.cloud[:, 1].max() > 0.3 else []
+
+    hit = _arm_meets_door(Planner(), [Move(grip, door), screw], chain)
+    assert hit is not None and hit["links"] == ["panda_link4"] and 0 < hit["index"] < screw.samples - 1
+    # The door's pose where it was met: turned past 30 deg (its tip past y = 0.3), not at the start.
+    turned = np.arctan2(screw.sampled[hit["index"]][1, 3], screw.sampled[hit["index"]][0, 3])
+    assert np.degrees(turned) > 30
+    # A piece that moves no door is not checked.
+    screw.carries = None
+    assert _arm_meets_door(Planner(), [Move(grip, door), screw], chain) is None
