@@ -145,3 +145,54 @@ def test_fridge_12036_is_held_only_by_its_own_handle_meeting_the_side_wall():
     # What stops it now is real: its handle bar meets the fridge's side wall, which the cavity needs.
     assert asset.extra["reach_blocked_by"].startswith("held by link_2 piece")
     assert (asset.open_qpos - asset.closed_qpos) / asset.extra["open_qpos_limit"] > 0.71
+
+
+KNOB_LINK = "knob_link_9"
+
+
+@pytest.fixture()
+def pushed_knob(tmp_path, decomposers):  # noqa: F811
+    """(folder, loader config): a microwave with a panel fixed on top of its body and a knob,
+    hinged on the body at its box's edge (a push turns it), whose box reaches 1 cm into the panel."""
+    config = PartNetLoadConfig(decomposer=f"{decomposers}:exact", workers=1)
+    asset = generate_object("microwave", 2, tmp_path / "objects")
+    folder = tmp_path / "objects" / asset.object_id
+    urdf = folder / "mobility.urdf"
+    body_link = next(l.get("name") for l in ET.parse(urdf).getroot().findall("link")
+                     if l.get("name") not in ("base", asset.target_link))
+    top, y = asset.bounds_high[2], asset.bounds_low[1] + 0.1
+    _add_link(urdf, "panel_link_9", body_link, trimesh.creation.box(extents=[0.1, 0.1, 0.02]), (0.0, y, top + 0.05))
+    knob = trimesh.creation.box(extents=[0.04, 0.04, 0.04])
+    knob.apply_translation([-0.02, 0.0, 0.0])  # in the knob's frame, the box beside its hinge
+    _add_link(urdf, KNOB_LINK, body_link, knob, (0.02, y, top + 0.07))
+    tree = ET.parse(urdf)
+    joint = next(j for j in tree.getroot().findall("joint") if j.get("name") == f"{KNOB_LINK}_joint")
+    joint.set("type", "revolute")
+    ET.SubElement(joint, "axis", xyz="0 1 0")
+    ET.SubElement(joint, "limit", lower="0", upper="5.76", effort="1", velocity="10")
+    tree.write(urdf)
+    with open(folder / "semantics.txt", "a") as f:
+        f.write(f"panel_link_9 static panel\n{KNOB_LINK} hinge knob\n")
+    return folder, config
+
+
+def _peak_speed_at_rest(asset) -> float:
+    from wpbench.assets.reach import restless_links
+
+    scene, articulation = load_collision_articulation(asset.urdf, 1.0)
+    moved = restless_links(articulation, asset.extra["closed_qpos_by_joint"], set())
+    return max(moved.values(), default=0.0)
+
+
+@pytest.mark.slow
+def test_a_knob_its_neighbour_pushes_at_rest_loses_its_collision(pushed_knob, tmp_path):
+    folder, config = pushed_knob
+    unfixed = load_partnet_object(folder, cache_dir=tmp_path / "cache", scale=1.0,
+                                  config=PartNetLoadConfig(decomposer=config.decomposer, workers=1, clear_path=False))
+    assert _peak_speed_at_rest(unfixed) > 1.0  # the knob moves while everything is held still
+
+    fixed = load_partnet_object(folder, cache_dir=tmp_path / "cache", scale=1.0, config=config)
+    assert list(fixed.extra["collision_restless"]) == [KNOB_LINK]
+    assert fixed.extra["collision_dropped"] == [f"{KNOB_LINK}#0"]
+    assert _peak_speed_at_rest(fixed) == 0.0
+    assert fixed.open_qpos == pytest.approx(fixed.extra["open_qpos_limit"])

@@ -11,8 +11,13 @@ drags the other door along, and even the true pose cannot open it. At load time:
    plane that keeps most of it (``wpbench.assets.convex_overlap.trim_away``); a piece
    with nothing left is dropped. Links joined by a joint never collide in physics (the
    door and the body it hangs on), so their overlaps are left alone;
-2. *probe*: the door is driven open in physics (``wpbench.assets.reach.probe_opening``);
-3. *drop*: when it stops short, the pieces pressed against it at the stop are tried,
+2. *settle*: everything is held closed in physics for a moment; a link outside the
+   target's group that moves anyway is pushed by a neighbour it overlaps (a knob sunk
+   into the body's panel spins up, and in an episode that reads as a blow-up). All its
+   pieces are dropped when the cavity survives without them (a knob's collision cannot
+   matter to the task); ``restless`` records them with their peak speed;
+3. *probe*: the door is driven open in physics (``wpbench.assets.reach.probe_opening``);
+4. *drop*: when it stops short, the pieces pressed against it at the stop are tried,
    strongest contact first: a piece is dropped only when the cavity survives without
    it (the caller's ``cavity_survives``), since a piece the cavity needs is real
    geometry (a side wall the handle meets), not a defect. Then probe again, at most
@@ -35,7 +40,7 @@ import numpy as np
 import trimesh
 
 from wpbench.assets.convex_overlap import overlap_inradius, trim_away
-from wpbench.assets.reach import OpeningProbe, probe_opening
+from wpbench.assets.reach import OpeningProbe, probe_opening, restless_links
 
 # Overlap (inscribed-ball radius, metres) above which two pieces interpenetrate rather than touch.
 OVERLAP_TOLERANCE_M = 0.0005
@@ -43,6 +48,8 @@ OVERLAP_TOLERANCE_M = 0.0005
 TRIM_GAP_M = 0.001
 # Most blocking pieces dropped before the door counts as blocked by real geometry.
 MAX_DROPPED_PIECES = 4
+# Most times the object is settled at rest (each round drops the parts that still moved).
+SETTLE_ROUNDS = 4
 CLEARED_URDF_TAG = "cleared"
 
 
@@ -53,6 +60,8 @@ class PathClearing:
     urdf: the URDF to use (the input one when nothing changed).
     trimmed / dropped: "link#piece" names of pieces cut back or removed (piece =
         index among the link's collision pieces in the input URDF).
+    restless: {link: peak joint speed at rest} of the links whose pieces were dropped
+        because they moved while held still.
     probe: the last opening probe (on ``urdf``).
     """
 
@@ -60,6 +69,7 @@ class PathClearing:
     probe: OpeningProbe
     trimmed: list[str] = field(default_factory=list)
     dropped: list[str] = field(default_factory=list)
+    restless: dict[str, float] = field(default_factory=dict)
 
     @property
     def changed(self) -> bool:
@@ -198,13 +208,32 @@ def clear_target_path(
     trimmed = trim_overlaps(pieces, moving, jointed_pairs(articulation)) if repair else []
     dropped: list[str] = []
     current = urdf
+    restless: dict[str, float] = {}
+    for _ in range(SETTLE_ROUNDS if repair else 0):
+        # A part freed of its neighbour may let the next one move: settle again until all is still.
+        if trimmed or dropped:
+            current = write_cleared_urdf(urdf, pieces, set(trimmed) | set(dropped), frames)
+        scene, articulation = load(current, scale)
+        found = False
+        for link, speed in sorted(restless_links(articulation, closed, moving).items()):
+            alive = [i for i, p in enumerate(pieces.get(link, [])) if p is not None]
+            trial = {name: [p for p in ps if p is not None] for name, ps in pieces.items() if name != link}
+            if alive and (cavity_survives is None or cavity_survives(trial)):
+                for i in alive:
+                    pieces[link][i] = None
+                    dropped.append(f"{link}#{i}")
+                restless[link] = round(speed, 2)
+                found = True
+        if not found:
+            break
+    settled = len(dropped)   # pieces of restless links; the probe's drops count from here
     while True:
         changed = set(trimmed) | set(dropped)
         if changed:
             current = write_cleared_urdf(urdf, pieces, changed, frames)
         scene, articulation = load(current, scale)
         probe = probe_opening(articulation, target_joint, closed, closed_q, open_q, moving_links=moving)
-        if probe.full or not repair or cavity_survives is None or len(dropped) >= MAX_DROPPED_PIECES:
+        if probe.full or not repair or cavity_survives is None or len(dropped) - settled >= MAX_DROPPED_PIECES:
             break
         spared = None
         for blocker in probe.blockers:
@@ -223,4 +252,4 @@ def clear_target_path(
         pieces[spared[0]][spared[1]] = None
         dropped.append(f"{spared[0]}#{spared[1]}")
     del scene, articulation
-    return PathClearing(current, probe, trimmed, dropped)
+    return PathClearing(current, probe, trimmed, dropped, restless)

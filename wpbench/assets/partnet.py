@@ -547,6 +547,7 @@ def load_partnet_object(
             "open_qpos_limit": float(open_q),  # the URDF limit; open_qpos is what physics reaches
             "collision_trimmed": list(clearing.trimmed) if clearing is not None else [],
             "collision_dropped": list(clearing.dropped) if clearing is not None else [],
+            "collision_restless": dict(clearing.restless) if clearing is not None else {},
             "reach_blocked_by": describe_blockers(clearing.probe) if clearing is not None and not clearing.probe.full else "",
             "target_label": target.label,
         },

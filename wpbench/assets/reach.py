@@ -113,3 +113,33 @@ def _blockers(scene, moving: set[str]) -> list[Blocker]:
         if key not in found or found[key].impulse < impulse:
             found[key] = Blocker(body.entity.name, piece, impulse, position)
     return sorted(found.values(), key=lambda b: -b.impulse)
+
+
+REST_SECONDS = 0.2
+RESTLESS_SPEED = 1.0   # rad/s or m/s: a part held at rest that moves this fast is being pushed
+
+
+def restless_links(articulation, rest_by_joint: dict[str, float], still_links: set[str]) -> dict[str, float]:
+    """{link: peak joint speed} of the links, outside ``still_links``, that move faster than
+    RESTLESS_SPEED while every joint is held at ``rest_by_joint`` for REST_SECONDS.
+
+    A part held still by its drive moves only when something pushes it: collision pieces of
+    a neighbour that it overlaps (a knob sunk into the body's panel spins up).
+    """
+    joints = articulation.get_active_joints()
+    qpos = np.array([rest_by_joint.get(j.name, 0.0) for j in joints], dtype=np.float32)
+    articulation.set_qpos(qpos)
+    articulation.set_qvel(np.zeros_like(qpos))
+    for j, q in zip(joints, qpos):
+        j.set_drive_properties(STIFFNESS, DAMPING, 1e6, "acceleration")
+        j.set_drive_target(float(q))
+    scene = articulation.get_links()[0].entity.scene
+    scene.set_timestep(PROBE_TIMESTEP)
+    peak = np.zeros(len(joints))
+    for _ in range(int(REST_SECONDS / PROBE_TIMESTEP)):
+        articulation.set_qf(articulation.compute_passive_force(gravity=True, coriolis_and_centrifugal=True))
+        scene.step()
+        peak = np.maximum(peak, np.abs(articulation.get_qvel()))
+    return {j.child_link.name: float(v) for j, v in zip(joints, peak)
+            if v > RESTLESS_SPEED and j.child_link.name not in still_links}
+

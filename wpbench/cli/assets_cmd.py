@@ -169,6 +169,8 @@ def check(
                          + (f"  fallbacks: {notes}" if notes else "")
                          + (f"  cleared: trimmed {asset.extra['collision_trimmed']} dropped {asset.extra['collision_dropped']}"
                             if asset.extra["collision_trimmed"] or asset.extra["collision_dropped"] else "")
+                         + (f"  no collision for {sorted(asset.extra['collision_restless'])}: they moved while held at rest"
+                            if asset.extra.get("collision_restless") else "")
                          + (f"  stops short, {asset.extra['reach_blocked_by']}" if asset.extra["reach_blocked_by"] else ""))
         if r.error is not None:
             line += f"refused  decomposition {r.seconds:6.1f} s  {r.error}"
