@@ -7,8 +7,8 @@ episodes). Plus the base placement rule
 (beside a door lying in front, within the arm's reach), the relay spots on the floor and on a
 flat surface in front of the opening, letting an object go higher where the arm stops
 lowering it, the pull-then-push rule on made-up boxes and doors, a held object kept off the
-arm's shoulder, more time for a piece's big joint steps, and the arm checked against the door
-moved along its screw."""
+arm's shoulder, more time for a piece's big joint steps, the arm checked against the door
+moved along its screw, and a door whose observed grasp point lies at the floor grasped higher."""
 
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ from wpbench import tasks  # noqa: F401
 from wpbench.sim.arm_placement import BASE_RADIUS, base_candidates, front_direction
 from wpbench.sim.door_push import WRIST_MIN_HEIGHT, handover_fraction, push_grip
 from wpbench.sim.failure import FAILURE_REASONS, PLANNING_FAILED, UNREACHABLE
+from wpbench.sim.panda_executor import FLOOR_GRASP_HEIGHT
 from executor_helpers import rotated_30, step_with
 
 
@@ -148,6 +149,22 @@ def test_push_only_where_the_wrist_would_meet_the_floor():
 
 place_camera_env = pytest.fixture(scope="module", name="place_camera_env")(
     lambda: (yield from _panda_place_in("camera")))
+
+
+@pytest.fixture(scope="module")
+def door_camera_env():
+    env = gym.make("wpbench/OpenDoor-v0", obs_mode="camera", assets="procedural", split="val", executor="panda")
+    yield env
+    env.close()
+
+
+def test_a_door_grasped_at_the_floor_is_grasped_higher(door_camera_env):
+    # Episode 47: a microwave whose observed cloud offers the gripper's choice a point about 4 cm
+    # above the floor, where no collision-free pre-grasp exists; the choice is made again among
+    # the door points above FLOOR_GRASP_HEIGHT.
+    r = step_with(door_camera_env, 47, lambda T: T)
+    assert r["success"], (r["failure_reason"], r["failure_detail"])
+    assert r["grasp_point"][2] >= FLOOR_GRASP_HEIGHT
 
 
 def test_side_entry_out_of_reach_is_relayed(place_camera_env):

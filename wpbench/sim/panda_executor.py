@@ -72,6 +72,7 @@ SYMMETRIC_ROLLS = (0.0, np.pi)
 MAX_GRASP_HEIGHT = 0.9       # m, a door is grasped no higher than this (the arm stands on the floor) ...
 MIN_GRASP_HEIGHT = 0.5       # ... and then no lower than this ...
 MIN_LOW_POINTS = 20          # ... when it shows at least this many points in between
+FLOOR_GRASP_HEIGHT = 0.12    # m, a door point lower than this is grasped only when the door shows no such band above it
 HINGE_REACH = 0.45           # m, a door no placement reaches along its whole arc is grasped this near its hinge
 PUSH_RETREAT = 0.12          # m, the hand backs off this far from a door it pulled before it pushes
 PUSH_DOOR_LAG = 0.08         # rad, the move to a push keeps clear of the door up to this far behind its plan
@@ -721,6 +722,11 @@ def execute_articulated_panda(scene: ArmScene, action_points: np.ndarray, anchor
     if grasp.tcp[2, 3] > MAX_GRASP_HEIGHT and len(low) >= MIN_LOW_POINTS:
         # A tall door: the same choice among the door points a floor-standing arm reaches well.
         grasp = choose(low, cross_pose) or grasp
+    band = action_points[(z >= FLOOR_GRASP_HEIGHT) & (z <= MAX_GRASP_HEIGHT)]
+    if grasp.tcp[2, 3] < FLOOR_GRASP_HEIGHT and len(band) >= MIN_LOW_POINTS:
+        # A grasp at the floor (the hand and wrist meet the floor about it): the same choice
+        # among the door points above the floor and within the arm's height.
+        grasp = choose(band, cross_pose) or grasp
     plan, failed, extra = _door_plan(scene, grasp, action_points, anchor_points, cross_pose, suction)
     screw = screw_of(cross_pose)
     if suction and plan is None and failed.reason == UNREACHABLE and screw.angle >= np.radians(10.0):
