@@ -73,7 +73,7 @@ MAX_GRASP_HEIGHT = 0.9       # m, a door is grasped no higher than this (the arm
 MIN_GRASP_HEIGHT = 0.5       # ... and then no lower than this ...
 MIN_LOW_POINTS = 20          # ... when it shows at least this many points in between
 FLOOR_GRASP_HEIGHT = 0.12    # m, a door point lower than this is grasped only when the door shows no such band above it
-HINGE_REACH = 0.45           # m, a door no placement reaches along its whole arc is grasped this near its hinge
+HINGE_REACHES = (0.45, 0.3)  # m, a door no placement reaches along its whole arc is grasped this near its hinge (in turn)
 PUSH_RETREAT = 0.12          # m, the hand backs off this far from a door it pulled before it pushes
 PUSH_DOOR_LAG = 0.08         # rad, the move to a push keeps clear of the door up to this far behind its plan
 TOP_SUCTION_ROLLS = (0.0, np.pi, np.pi / 2, -np.pi / 2)
@@ -732,17 +732,24 @@ def execute_articulated_panda(scene: ArmScene, action_points: np.ndarray, anchor
     if suction and plan is None and failed.reason == UNREACHABLE and screw.angle >= np.radians(10.0):
         # No placement reaches the whole arc: the same choice among the door points nearer the hinge
         # (a shorter arc; the door is pushed with more force at the cup).
-        near = action_points[np.linalg.norm(np.cross(action_points - screw.point, screw.axis), axis=1) <= HINGE_REACH]
-        nz = near[:, 2]
-        if grasp.tcp[2, 3] > MAX_GRASP_HEIGHT and np.sum((nz >= MIN_GRASP_HEIGHT) & (nz <= MAX_GRASP_HEIGHT)) >= MIN_LOW_POINTS:
-            near = near[(nz >= MIN_GRASP_HEIGHT) & (nz <= MAX_GRASP_HEIGHT)]
-        closer = choose(near, cross_pose) if len(near) >= MIN_LOW_POINTS else None
-        if closer is not None:
+        tried = extra.get("placements_tried", 0)
+        for reach in HINGE_REACHES:
+            near = action_points[np.linalg.norm(np.cross(action_points - screw.point, screw.axis), axis=1) <= reach]
+            nz = near[:, 2]
+            if grasp.tcp[2, 3] > MAX_GRASP_HEIGHT and np.sum((nz >= MIN_GRASP_HEIGHT) & (nz <= MAX_GRASP_HEIGHT)) >= MIN_LOW_POINTS:
+                near = near[(nz >= MIN_GRASP_HEIGHT) & (nz <= MAX_GRASP_HEIGHT)]
+            elif np.sum(nz >= FLOOR_GRASP_HEIGHT) >= MIN_LOW_POINTS:
+                near = near[nz >= FLOOR_GRASP_HEIGHT]
+            closer = choose(near, cross_pose) if len(near) >= MIN_LOW_POINTS else None
+            if closer is None:
+                continue
             plan2, failed2, extra2 = _door_plan(scene, closer, action_points, anchor_points, cross_pose, suction)
-            extra2["placements_tried"] = extra2.get("placements_tried", 0) + extra.get("placements_tried", 0)
+            tried += extra2.get("placements_tried", 0)
+            extra2["placements_tried"] = tried
             extra2["grasp_near_hinge"] = True
             if plan2 is not None or failed2.reason != UNREACHABLE:
                 plan, failed, extra = plan2, failed2, extra2
+                break
     if plan is None:
         return _finish(None, failed, extra)
     return _carry_out(scene, plan, SYMMETRIC_ROLLS, extra, STALLED_AGAINST_HINGE, free_joint, hold_joint)
