@@ -74,6 +74,8 @@ MIN_GRASP_HEIGHT = 0.5       # ... and then no lower than this ...
 MIN_LOW_POINTS = 20          # ... when it shows at least this many points in between
 FLOOR_GRASP_HEIGHT = 0.12    # m, a door point lower than this is grasped only when the door shows no such band above it
 HINGE_REACHES = (0.45, 0.3)  # m, a door no placement reaches along its whole arc is grasped this near its hinge (in turn)
+CUP_FOOTPRINT = 0.05        # m, no observed door point within this of a cup grasp (across the approach) ...
+CUP_PROUD = 0.01            # m ... stands further out than the face (a handle the fingers would strike)
 PUSH_RETREAT = 0.12          # m, the hand backs off this far from a door it pulled before it pushes
 PUSH_DOOR_LAG = 0.08         # rad, the move to a push keeps clear of the door up to this far behind its plan
 TOP_SUCTION_ROLLS = (0.0, np.pi, np.pi / 2, -np.pi / 2)
@@ -713,7 +715,7 @@ def execute_articulated_panda(scene: ArmScene, action_points: np.ndarray, anchor
                               hold_joint: Callable[[], None]) -> ExecutionResult:
     """Grasp the door or drawer as the gripper does, move it along the predicted screw, release, settle."""
     suction = scene.grasp_mode == "suction"
-    choose = suction_point if suction else articulated_grasp
+    choose = _clear_suction(action_points) if suction else articulated_grasp
     grasp = choose(action_points, cross_pose)
     if grasp is None:   # the prediction moves nothing: the arm has nothing to do
         return _finish(None, _settle(scene), {"grasp_point": None})
@@ -753,6 +755,36 @@ def execute_articulated_panda(scene: ArmScene, action_points: np.ndarray, anchor
     if plan is None:
         return _finish(None, failed, extra)
     return _carry_out(scene, plan, SYMMETRIC_ROLLS, extra, STALLED_AGAINST_HINGE, free_joint, hold_joint)
+
+
+def _proud_near(points: np.ndarray, grasp: Grasp, candidates: np.ndarray) -> np.ndarray:
+    """(M,) for each of ``candidates`` (M, 3): whether an observed door point of ``points`` within
+    CUP_FOOTPRINT of it across ``grasp``'s approach stands more than CUP_PROUD out of the face
+    the grasp is on (or it stands out itself)."""
+    out = -grasp.approach
+    face = float(grasp.tcp[:3, 3] @ out)
+    proud = points[points @ out > face + CUP_PROUD]
+    if len(proud) == 0:
+        return np.zeros(len(candidates), dtype=bool)
+    d = candidates[:, None, :] - proud[None, :, :]
+    d = d - (d @ out)[..., None] * out
+    return (np.linalg.norm(d, axis=-1).min(1) < CUP_FOOTPRINT) | (candidates @ out > face + CUP_PROUD)
+
+
+def _clear_suction(action_points: np.ndarray) -> Callable[[np.ndarray, np.ndarray], Grasp | None]:
+    """``suction_point``, chosen again among the given door points whose surroundings are clear
+    when a protrusion of the observed door (a handle) stands within the hand's footprint of the
+    first choice: the closed fingers, as wide as the cup, would strike it on the way in and
+    shove the door before the cup touches its face."""
+    def choose(points: np.ndarray, cross_pose: np.ndarray) -> Grasp | None:
+        grasp = suction_point(points, cross_pose)
+        if grasp is None or not _proud_near(action_points, grasp, grasp.tcp[None, :3, 3])[0]:
+            return grasp
+        clear = points[~_proud_near(action_points, grasp, points)]
+        if len(clear) < MIN_LOW_POINTS:
+            return grasp
+        return suction_point(clear, cross_pose) or grasp
+    return choose
 
 
 def _door_plan(scene: ArmScene, grasp: Grasp, action_points: np.ndarray, anchor_points: np.ndarray,
