@@ -77,6 +77,7 @@ HINGE_REACHES = (0.45, 0.3)  # m, a door no placement reaches along its whole ar
 CUP_FOOTPRINT = 0.05        # m, no observed door point within this of a cup grasp (across the approach) ...
 CUP_PROUD = 0.01            # m ... stands further out than the face (a handle the fingers would strike)
 PUSH_RETREAT = 0.12          # m, the hand backs off this far from a door it pulled before it pushes
+PULL_HOLD = 0.3             # s, the hand holds a pulled door still this long before it lets go of it
 PUSH_DOOR_LAG = 0.08         # rad, the move to a push keeps clear of the door up to this far behind its plan
 TOP_SUCTION_ROLLS = (0.0, np.pi, np.pi / 2, -np.pi / 2)
 RELAY_LEADS = (0.05, 0.2, 0.35)          # m, a relay spot lies this much further out than the slide needs ...
@@ -160,6 +161,13 @@ class ReleaseStep:
 @dataclass
 class FreeJointStep:
     pass
+
+
+@dataclass
+class HoldStep:
+    """Keep the arm still (the joint targets where they are) for ``seconds``."""
+
+    seconds: float
 
 
 def _line(a: np.ndarray, b: np.ndarray, check_stall: bool = True) -> Path:
@@ -334,6 +342,12 @@ def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.nda
             chain, why = planner.chain(tcps, goal, ARM_LINKS)
             if chain is not None:
                 hit = _arm_meets_door(planner, script[k + 1:j], chain)
+                if hit is None and j < len(script):
+                    # The next free-space move starts where this chain ends: that pose must clear its obstacles.
+                    planner.set_cloud(np.concatenate([script[j].obstacles, floor]), MOVE_CLEARANCE)
+                    touching = planner.collisions(chain[-1], ARM_LINKS + HAND_LINKS)
+                    if touching:
+                        hit = {"ok": False, "why": "collision", "links": touching, "index": len(tcps) - 1}
                 if hit is None:
                     break
                 chain, why = None, hit
@@ -666,6 +680,8 @@ def _carry_out(scene: ArmScene, plan: Plan, rolls: tuple[float, ...], extra: dic
                 run.release()
             elif isinstance(step, FreeJointStep) and free_joint is not None:
                 free_joint()
+            elif isinstance(step, HoldStep):
+                run.wait(step.seconds)
     except _Abort as abort:
         arm.detach()
         arm.set_fingers(2 * FINGER_OPEN)
@@ -820,7 +836,8 @@ def _door_plan(scene: ArmScene, grasp: Grasp, action_points: np.ndarray, anchor_
         lag = min(handover, PUSH_DOOR_LAG / max(screw_of(cross_pose).angle, 1e-9))
         door_then = np.concatenate([_moved(action_points, M) for M in
                                     interpolate(cross_pose, np.linspace(handover - lag, handover, 4))])
-        scripts.append([*_approach(g, suction, scene_points), FreeJointStep(), pull,
+        # The door comes to rest with the hand before the cup lets go (it would coast on, shut).
+        scripts.append([*_approach(g, suction, scene_points), FreeJointStep(), pull, HoldStep(PULL_HOLD),
                         *_retreat(pull.poses(1.0), pull.poses(1.0)[:3, 2], PUSH_RETREAT),
                         Move(before, np.concatenate([anchor_points, _densified(door_then)])),
                         _line(before, start, check_stall=False),
