@@ -731,10 +731,35 @@ def execute_articulated_panda(scene: ArmScene, action_points: np.ndarray, anchor
                               hold_joint: Callable[[], None]) -> ExecutionResult:
     """Grasp the door or drawer as the gripper does, move it along the predicted screw, release, settle."""
     suction = scene.grasp_mode == "suction"
-    choose = _clear_suction(action_points) if suction else articulated_grasp
+    if suction:
+        # First a cup grasp clear of protrusions (a handle); when no placement plans it and
+        # it differs from the gripper's choice, that choice.
+        plan, failed, extra = _door_attempt(scene, _clear_suction(action_points), action_points, anchor_points,
+                                            cross_pose, suction)
+        if plan is None and extra.get("grasp_clear_of_handle"):
+            plan2, failed2, extra2 = _door_attempt(scene, suction_point, action_points, anchor_points,
+                                                   cross_pose, suction)
+            extra2["placements_tried"] = extra2.get("placements_tried", 0) + extra.get("placements_tried", 0)
+            if plan2 is not None:
+                plan, failed, extra = plan2, failed2, extra2
+    else:
+        plan, failed, extra = _door_attempt(scene, articulated_grasp, action_points, anchor_points, cross_pose,
+                                            suction)
+    if plan is None:
+        if failed is None:   # the prediction moves nothing: the arm has nothing to do
+            return _finish(None, _settle(scene), extra)
+        return _finish(None, failed, extra)
+    return _carry_out(scene, plan, SYMMETRIC_ROLLS, extra, STALLED_AGAINST_HINGE, free_joint, hold_joint)
+
+
+def _door_attempt(scene: ArmScene, choose: Callable, action_points: np.ndarray, anchor_points: np.ndarray,
+                  cross_pose: np.ndarray, suction: bool) -> tuple[Plan | None, ExecutionResult | None, dict]:
+    """The door's grasp by ``choose`` (kept within the arm's height, nearer the hinge when the
+    whole arc is out of reach), planned: (plan or None, the failure or None when the
+    prediction moves nothing, what the result records)."""
     grasp = choose(action_points, cross_pose)
-    if grasp is None:   # the prediction moves nothing: the arm has nothing to do
-        return _finish(None, _settle(scene), {"grasp_point": None})
+    if grasp is None:
+        return None, None, {"grasp_point": None}
     z = action_points[:, 2]
     low = action_points[(z >= MIN_GRASP_HEIGHT) & (z <= MAX_GRASP_HEIGHT)]
     if grasp.tcp[2, 3] > MAX_GRASP_HEIGHT and len(low) >= MIN_LOW_POINTS:
@@ -768,9 +793,9 @@ def execute_articulated_panda(scene: ArmScene, action_points: np.ndarray, anchor
             if plan2 is not None or failed2.reason != UNREACHABLE:
                 plan, failed, extra = plan2, failed2, extra2
                 break
-    if plan is None:
-        return _finish(None, failed, extra)
-    return _carry_out(scene, plan, SYMMETRIC_ROLLS, extra, STALLED_AGAINST_HINGE, free_joint, hold_joint)
+    if getattr(choose, "moved", None) is not None and choose.moved[-1]:
+        extra["grasp_clear_of_handle"] = True
+    return plan, failed, extra
 
 
 def _proud_near(points: np.ndarray, grasp: Grasp, candidates: np.ndarray) -> np.ndarray:
@@ -794,12 +819,14 @@ def _clear_suction(action_points: np.ndarray) -> Callable[[np.ndarray, np.ndarra
     shove the door before the cup touches its face."""
     def choose(points: np.ndarray, cross_pose: np.ndarray) -> Grasp | None:
         grasp = suction_point(points, cross_pose)
-        if grasp is None or not _proud_near(action_points, grasp, grasp.tcp[None, :3, 3])[0]:
-            return grasp
-        clear = points[~_proud_near(action_points, grasp, points)]
-        if len(clear) < MIN_LOW_POINTS:
-            return grasp
-        return suction_point(clear, cross_pose) or grasp
+        moved = None
+        if grasp is not None and _proud_near(action_points, grasp, grasp.tcp[None, :3, 3])[0]:
+            clear = points[~_proud_near(action_points, grasp, points)]
+            if len(clear) >= MIN_LOW_POINTS:
+                moved = suction_point(clear, cross_pose)
+        choose.moved.append(moved is not None)
+        return moved or grasp
+    choose.moved = []   # whether each choice was moved off its first pick
     return choose
 
 
