@@ -359,3 +359,51 @@ def test_the_arm_is_checked_against_the_door_moved_along_its_screw():
     # A piece that moves no door is not checked.
     screw.carries = None
     assert _arm_meets_door(Planner(), [Move(grip, door), screw], chain) is None
+
+
+def test_strip_bases_stand_in_front_of_an_opening_beside_a_door_open_at_a_right_angle():
+    from wpbench.sim.arm_placement import STRIP_HALF_WIDTH
+
+    rng = np.random.default_rng(2)
+    # A fridge (x < 0, 1.6 m tall, 0.7 m wide) with its door open at a right angle on its +y side
+    # (x 0 to 0.7, y 0.35), a block on the floor in front of the opening and a path from it into
+    # the cavity at 0.85 m height.
+    body = rng.uniform([-0.6, -0.35, 0.0], [0.0, 0.35, 1.6], size=(3000, 3))
+    door = np.column_stack([rng.uniform(0.0, 0.7, 1200), np.full(1200, 0.37), rng.uniform(0.0, 1.6, 1200)])
+    anchor = np.concatenate([body, door])
+    tcps = np.tile(np.eye(4), (3, 1, 1))
+    tcps[:, :3, :3] = [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]   # approach -x
+    tcps[:, :3, 3] = [[0.45, 0.0, 0.1], [0.25, 0.0, 0.85], [-0.1, 0.0, 0.85]]
+    candidates = base_candidates(anchor, anchor, tcps, tcps[0, :3, 3])
+    assert candidates
+    lateral = np.array([0.0, 1.0])
+    opening = [b for b in candidates if 0.0 < b[0, 3] < 0.7 and b[1, 3] < 0.35]
+    assert opening                                    # in front of the opening, beside the door
+    for base in opening:
+        d = anchor[:, :2] - base[:2, 3]
+        strip = np.abs(d @ lateral) < STRIP_HALF_WIDTH
+        assert not strip.any() or d[strip, 0].max() <= -BASE_RADIUS
+        assert np.min(np.linalg.norm(anchor[:, :2] - base[:2, 3], axis=1)) >= BASE_RADIUS
+
+
+def test_a_cup_grasp_keeps_clear_of_a_handle():
+    from wpbench.sim.grasp_choice import suction_point
+    from wpbench.sim.panda_executor import CUP_FOOTPRINT, _clear_suction
+
+    rng = np.random.default_rng(3)
+    # An oven door's outer face (x = 0, facing +x) hinged at its bottom (z = 0.1), a handle bar
+    # standing 4 cm off it near the top; the prediction turns the door 1.2 rad open.
+    face = np.column_stack([np.zeros(3000), rng.uniform(-0.3, 0.3, 3000), rng.uniform(0.1, 0.7, 3000)])
+    bar = np.column_stack([np.full(60, 0.04), rng.uniform(-0.2, 0.2, 60), rng.uniform(0.6, 0.62, 60)])
+    door = np.concatenate([face, bar])
+    T = _hinge([0.0, 1.0, 0.0], 1.2, np.array([0.0, 0.0, 0.1]))
+    first = suction_point(door, T)
+    near = lambda g: np.min(np.linalg.norm((bar - g.tcp[:3, 3])[:, 1:], axis=1))   # across the approach (x)
+    assert near(first) < CUP_FOOTPRINT                 # the gripper's own choice is beside the handle
+    choose = _clear_suction(door)
+    clear = choose(door, T)
+    assert near(clear) >= CUP_FOOTPRINT and abs(clear.tcp[0, 3]) < 0.01 and choose.moved == [True]
+    assert np.allclose(clear.approach, first.approach, atol=0.01)
+    # A door with no handle: the same choice.
+    choose = _clear_suction(face)
+    assert np.allclose(choose(face, T).tcp, suction_point(face, T).tcp) and choose.moved == [False]
