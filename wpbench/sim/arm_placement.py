@@ -21,6 +21,10 @@ The rule (docs/executors.md, ``panda``):
   obstacle test and stand BASE_RADIUS outside the footprint (convex hull) of the anchor's
   tall part (beside the furniture, not only in front of it), nearest reach first (the farthest wrist of the path
   from the shoulder; see below), at most MAX_GRID of them.
+- Last, the points of a STRIP_STEP grid within GRID_EXTENT of the middle that stand further
+  out than the anchor points within STRIP_HALF_WIDTH of them across the front, plus
+  BASE_RADIUS (in front of a fridge's opening, beside its door open at a right angle), with
+  the same obstacle test, nearest reach first, at most MAX_GRID of them.
 - Every candidate must reach the path: for each TCP pose, the wrist (WRIST_BACK behind the
   TCP along its approach) lies within MAX_WRIST_REACH of the shoulder (SHOULDER_HEIGHT above
   the base) and at least MIN_WRIST_RADIUS from the base's vertical axis horizontally. This
@@ -44,6 +48,8 @@ MIN_WRIST_RADIUS = 0.15                  # m, a wrist closer to the base's axis 
 GRID_STEP = 0.1                          # m
 GRID_EXTENT = 1.0                        # m
 MAX_GRID = 8
+STRIP_HALF_WIDTH = 0.3                   # m, the anchor points a base must stand in front of: those this near it across the front
+STRIP_STEP = 0.05                        # m, the grid of such bases
 
 
 def _check(points: np.ndarray, name: str) -> np.ndarray:
@@ -156,4 +162,35 @@ def base_candidates(anchor_points: np.ndarray, obstacle_points: np.ndarray, path
               if not any(np.allclose(b, a) for a in strict)]
     grid = [b for b in _candidates(anchor, obstacles, tcps, grasp_point, tall, grid=True)
             if not any(np.allclose(b[:2, 3], a[:2, 3], atol=0.05) for a in strict + beside)]
-    return strict + beside + grid
+    strip = [b for b in _strip_candidates(anchor, obstacles, tcps, grasp_point)
+             if not any(np.allclose(b[:2, 3], a[:2, 3], atol=0.05) for a in strict + beside + grid)]
+    return strict + beside + grid + strip
+
+
+def _strip_candidates(anchor: np.ndarray, obstacles: np.ndarray, tcps: np.ndarray,
+                      grasp_point: np.ndarray) -> list[np.ndarray]:
+    """Bases on a STRIP_STEP grid within GRID_EXTENT of the path's middle that stand in front of
+    the anchor points within STRIP_HALF_WIDTH of them across the front (plus BASE_RADIUS), not of
+    the whole anchor: in front of a fridge's opening, beside its door open at a right angle, which
+    stands further out. The same obstacle and reach tests; those whose farthest wrist is nearest
+    first, MAX_GRID at most."""
+    front = front_direction(anchor, grasp_point)[:2]
+    lateral = np.array([-front[1], front[0]])
+    middle = tcps[:, :2, 3].mean(0)
+    low = obstacles[obstacles[:, 2] < BASE_HEIGHT, :2]
+    g = np.arange(-GRID_EXTENT, GRID_EXTENT + 1e-9, STRIP_STEP)
+    xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    xy = xy[np.linalg.norm(xy, axis=1) <= GRID_EXTENT] + middle
+    scored = []
+    for p in xy:
+        far, near = wrist_reach(p, tcps)
+        if far > MAX_WRIST_REACH or near < MIN_WRIST_RADIUS:
+            continue
+        if len(low) and np.min(np.linalg.norm(low - p, axis=1)) < BASE_RADIUS:
+            continue
+        d = anchor[:, :2] - p
+        strip = np.abs(d @ lateral) < STRIP_HALF_WIDTH
+        if strip.any() and float((d[strip] @ front).max()) > -BASE_RADIUS:
+            continue
+        scored.append((far, tuple(p)))
+    return [base_pose(np.array(p), middle) for _, p in sorted(scored)[:MAX_GRID]]
