@@ -50,7 +50,7 @@ from wpbench.sim.gripper_executor import (BLOCKED_OPENING, CARRY_CLEARANCE, CLOS
 from wpbench.sim.panda_arm import HOME_QPOS, PandaArm
 from wpbench.sim.place_goal import rest_on_support, upright_equivalent
 from wpbench.sim.screw_path import interpolate, path_length, screw_of
-from wpbench.sim.side_entry import is_roofed, plan_side_entry, segment_poses
+from wpbench.sim.side_entry import FLOOR_GAP, is_roofed, plan_side_entry, segment_poses
 
 MAX_JOINT_SPEED = 1.0        # rad/s, the fastest joint of a free-space move (mean speed x 1.875 at the peak)
 MIN_MOVE_SECONDS = 0.3
@@ -1083,6 +1083,20 @@ def _without_support(anchor_points: np.ndarray, object_points: np.ndarray) -> np
     return anchor_points[keep] if keep.any() else anchor_points
 
 
+def _support_floor(anchor_points: np.ndarray, around: np.ndarray) -> np.ndarray:
+    """The points of ``anchor_points`` that :func:`_without_support` left out of ``around`` (the
+    surface a relayed object stands on), filled in between neighbours and lowered by
+    MOVE_CLEARANCE - FLOOR_GAP: an obstacle a free-space move keeps the palm FLOOR_GAP above
+    (the side entry's own gap above the surface)."""
+    if len(around) == len(anchor_points):
+        return np.empty((0, 3))
+    rows = {tuple(p) for p in np.round(around, 6)}
+    surface = anchor_points[[tuple(p) not in rows for p in np.round(anchor_points, 6)]]
+    if len(surface) > 7:
+        surface = _densified(surface)
+    return surface - [0.0, 0.0, MOVE_CLEARANCE - FLOOR_GAP]
+
+
 def _entries(object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray,
              viewpoint: np.ndarray | None, relayed: bool) -> list:
     """The ways into a roofed cavity: [(plan, scripts, rolls, extra)] for the cup on the side face
@@ -1164,9 +1178,16 @@ def _roofed_entry(scene: ArmScene, object_points: np.ndarray, anchor_points: np.
         # For the hand's path, the surface the object stands on is the side pick's floor (the palm keeps
         # above it), not an obstacle; the arm's links keep clear of it.
         around = _without_support(anchor_points, relayed)
+        # The free-space moves keep the palm's height above that surface: its points, filled in
+        # and lowered so that the moves' clearance leaves the palm's gap above them.
+        floor = _support_floor(anchor_points, around)
         found = False
         for plan, scripts2, rolls2, extra2 in _entries(relayed, around, then, viewpoint, relayed=True):
             found = True
+            for script in scripts2:
+                for step in script:
+                    if isinstance(step, Move):
+                        step.obstacles = np.concatenate([step.obstacles, floor])
             second, why2 = _plan(scene, scripts2, anchor_points, np.concatenate([anchor_points, relayed, goal_points]),
                                  plan.pick[:3, 3], extra)
             if second is None:
