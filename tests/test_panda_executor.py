@@ -407,3 +407,20 @@ def test_a_cup_grasp_keeps_clear_of_a_handle():
     # A door with no handle: the same choice.
     choose = _clear_suction(face)
     assert np.allclose(choose(face, T).tcp, suction_point(face, T).tcp) and choose.moved == [False]
+
+
+def test_a_relayed_objects_support_is_a_lowered_floor_for_the_move_to_its_pick():
+    from wpbench.sim.panda_executor import MOVE_CLEARANCE, _support_floor, _without_support
+    from wpbench.sim.side_entry import FLOOR_GAP
+
+    rng = np.random.default_rng(4)
+    # An open oven door lying flat 0.15 m up in front of the oven, a block standing on it.
+    body = rng.uniform([-0.6, -0.3, 0.0], [0.0, 0.3, 0.8], size=(1000, 3))
+    door = np.column_stack([rng.uniform(0.0, 0.6, 300), rng.uniform(-0.3, 0.3, 300), np.full(300, 0.15)])
+    anchor = np.concatenate([body, door])
+    block = rng.uniform([0.25, -0.04, 0.15], [0.33, 0.04, 0.23], size=(200, 3))
+    around = _without_support(anchor, block)
+    floor = _support_floor(anchor, around)
+    assert len(around) < len(anchor) and len(floor) >= len(anchor) - len(around)
+    assert np.allclose(floor[:, 2], 0.15 - (MOVE_CLEARANCE - FLOOR_GAP))
+    assert len(_support_floor(anchor, anchor)) == 0
