@@ -422,5 +422,6 @@ def test_a_relayed_objects_support_is_a_lowered_floor_for_the_move_to_its_pick()
     around = _without_support(anchor, block)
     floor = _support_floor(anchor, around)
     assert len(around) < len(anchor) and len(floor) >= len(anchor) - len(around)
-    assert np.allclose(floor[:, 2], 0.15 - (MOVE_CLEARANCE - FLOOR_GAP))
+    # The door (and the body's foot beside it) lowered by the move's clearance less the palm's gap.
+    assert np.isclose(floor[:, 2].max(), 0.15 - (MOVE_CLEARANCE - FLOOR_GAP))
     assert len(_support_floor(anchor, anchor)) == 0
