@@ -415,13 +415,13 @@ def test_a_relayed_objects_support_is_a_lowered_floor_for_the_move_to_its_pick()
 
     rng = np.random.default_rng(4)
     # An open oven door lying flat 0.15 m up in front of the oven, a block standing on it.
-    body = rng.uniform([-0.6, -0.3, 0.0], [0.0, 0.3, 0.8], size=(1000, 3))
-    door = np.column_stack([rng.uniform(0.0, 0.6, 300), rng.uniform(-0.3, 0.3, 300), np.full(300, 0.15)])
+    body = rng.uniform([-0.6, -0.3, 0.0], [-0.15, 0.3, 0.8], size=(1000, 3))
+    door = np.column_stack([rng.uniform(-0.15, 0.6, 300), rng.uniform(-0.3, 0.3, 300), np.full(300, 0.15)])
     anchor = np.concatenate([body, door])
     block = rng.uniform([0.25, -0.04, 0.15], [0.33, 0.04, 0.23], size=(200, 3))
     around = _without_support(anchor, block)
     floor = _support_floor(anchor, around)
     assert len(around) < len(anchor) and len(floor) >= len(anchor) - len(around)
-    # The door (and the body's foot beside it) lowered by the move's clearance less the palm's gap.
-    assert np.isclose(floor[:, 2].max(), 0.15 - (MOVE_CLEARANCE - FLOOR_GAP))
+    # The door under and around the block, lowered by the move's clearance less the palm's gap.
+    assert np.allclose(floor[:, 2], 0.15 - (MOVE_CLEARANCE - FLOOR_GAP))
     assert len(_support_floor(anchor, anchor)) == 0
