@@ -114,6 +114,21 @@ def _hull_test(points: np.ndarray):
     return lambda q: tri.find_simplex(q) >= 0
 
 
+def _reachable_grid(middle: np.ndarray, step: float, tcps: np.ndarray, low: np.ndarray):
+    """Yield ``(farthest wrist distance, xy)`` for the points of a ``step`` grid within GRID_EXTENT
+    of ``middle`` from which every TCP pose is within the wrist's reach and that stand
+    BASE_RADIUS clear of the low obstacle points ``low`` (K, 2)."""
+    g = np.arange(-GRID_EXTENT, GRID_EXTENT + 1e-9, step)
+    xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    for p in xy[np.linalg.norm(xy, axis=1) <= GRID_EXTENT] + middle:
+        far, near = wrist_reach(p, tcps)
+        if far > MAX_WRIST_REACH or near < MIN_WRIST_RADIUS:
+            continue
+        if len(low) and np.min(np.linalg.norm(low - p, axis=1)) < BASE_RADIUS:
+            continue
+        yield far, p
+
+
 def _candidates(anchor: np.ndarray, obstacles: np.ndarray, tcps: np.ndarray, grasp_point: np.ndarray,
                 front_from: np.ndarray, grid: bool = False) -> list[np.ndarray]:
     front = front_direction(anchor, grasp_point)[:2]
@@ -123,18 +138,10 @@ def _candidates(anchor: np.ndarray, obstacles: np.ndarray, tcps: np.ndarray, gra
     low = obstacles[obstacles[:, 2] < BASE_HEIGHT, :2]
     out = []
     if grid:
-        g = np.arange(-GRID_EXTENT, GRID_EXTENT + 1e-9, GRID_STEP)
-        xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
-        xy = xy[np.linalg.norm(xy, axis=1) <= GRID_EXTENT] + middle
         inside = _hull_test(front_from)
         ring = BASE_RADIUS * np.array([[np.cos(a), np.sin(a)] for a in np.linspace(0, 2 * np.pi, 8, endpoint=False)])
         scored = []
-        for p in xy:
-            far, near = wrist_reach(p, tcps)
-            if far > MAX_WRIST_REACH or near < MIN_WRIST_RADIUS:
-                continue
-            if len(low) and np.min(np.linalg.norm(low - p, axis=1)) < BASE_RADIUS:
-                continue
+        for far, p in _reachable_grid(middle, GRID_STEP, tcps, low):
             if inside is not None and inside(np.vstack([p, p + ring])).any():
                 continue
             scored.append((far, tuple(p)))
@@ -178,16 +185,8 @@ def _strip_candidates(anchor: np.ndarray, obstacles: np.ndarray, tcps: np.ndarra
     lateral = np.array([-front[1], front[0]])
     middle = tcps[:, :2, 3].mean(0)
     low = obstacles[obstacles[:, 2] < BASE_HEIGHT, :2]
-    g = np.arange(-GRID_EXTENT, GRID_EXTENT + 1e-9, STRIP_STEP)
-    xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
-    xy = xy[np.linalg.norm(xy, axis=1) <= GRID_EXTENT] + middle
     scored = []
-    for p in xy:
-        far, near = wrist_reach(p, tcps)
-        if far > MAX_WRIST_REACH or near < MIN_WRIST_RADIUS:
-            continue
-        if len(low) and np.min(np.linalg.norm(low - p, axis=1)) < BASE_RADIUS:
-            continue
+    for far, p in _reachable_grid(middle, STRIP_STEP, tcps, low):
         d = anchor[:, :2] - p
         strip = np.abs(d @ lateral) < STRIP_HALF_WIDTH
         if strip.any() and float((d[strip] @ front).max()) > -BASE_RADIUS:
