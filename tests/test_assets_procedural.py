@@ -211,6 +211,22 @@ def test_instances_vary_in_shape_handles_and_hinges():
         if c in ("microwave", "fridge", "safe"):
             assert {bp.extra["hinge"] for bp in bps} == {"left", "right"}, c
     assert len({build_blueprint("fridge", i, 0).extra["style"] for i in range(16)}) == 3
+    fridge_stops = np.rad2deg([build_blueprint("fridge", i, 0).open_qpos for i in range(16)])
+    assert fridge_stops.min() >= 120 and fridge_stops.max() <= 150 and fridge_stops.std() > 5
+
+
+def test_storage_is_drawer_chests_and_door_cabinets_with_both_hinge_sides():
+    bps = [build_blueprint("storage", i, 0) for i in range(40)]
+    chests = [bp for bp in bps if bp.extra["style"] == "drawer_chest"]
+    cabinets = [bp for bp in bps if bp.extra["style"] == "door_cabinet"]
+    assert len(chests) >= 10 and len(cabinets) >= 10
+    assert {bp.joint_type for bp in chests} == {"prismatic"} and {bp.joint_type for bp in cabinets} == {"revolute"}
+    assert {bp.extra["hinge"] for bp in cabinets} == {"left", "right"}
+    assert {bp.extra["doors"] for bp in cabinets} == {1, 2}
+    stops = np.rad2deg([bp.open_qpos for bp in cabinets])
+    assert stops.min() >= 105 and stops.max() <= 130
+    # one angle lies within the 10% success tolerance of every stop: upper / lower <= 1.25
+    assert stops.max() / stops.min() <= 1.25
 
 
 def test_unknown_category_is_rejected_with_the_valid_names(tmp_path):

@@ -163,6 +163,19 @@ def make_handle(
     return Handle(parts, kind, grasp, direction)
 
 
+def shelf_bottoms(rng: np.random.Generator, z0: float, z1: float, min_gap: float, min_count: int = 1,
+                  max_count: int = 4, thickness: float = 0.02) -> list[float]:
+    """z of ``min_count .. max_count`` shelf bottoms (as many as fit) splitting [z0, z1] into
+    compartments at least ``min_gap`` high; ``thickness`` is the allowance per shelf."""
+    room = int((z1 - z0) // (min_gap + thickness)) - 1
+    n = int(rng.integers(min_count, max(min_count, min(room, max_count)) + 1)) if room >= 1 else 0
+    if n == 0:
+        return []
+    spacing = (z1 - z0) / (n + 1)
+    jitter = max(0.0, (spacing - min_gap - thickness) / 2)
+    return [round(z0 + spacing * (k + 1) + float(rng.uniform(-jitter, jitter)), 4) for k in range(n)]
+
+
 def window(face_x: float, y_range, z_range, rgba: RGBA = GLASS) -> Box:
     """A dark glass pane drawn just proud of a door face (visual only)."""
     (y0, y1), (z0, z1) = y_range, z_range

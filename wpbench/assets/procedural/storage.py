@@ -1,6 +1,6 @@
-"""Storage furniture: a chest of drawers (one or two columns) on a plinth or legs.
+"""Storage furniture, half of it chests of drawers and half door cabinets, on a plinth or legs.
 
-Each drawer is a prismatic link: an overlay front panel plus an open box (bottom,
+Chest of drawers (one or two columns). Each drawer is a prismatic link: an overlay front panel plus an open box (bottom,
 two sides, back) that slides along +x. The open limit is a fixed fraction (0.8) of
 the drawer box's depth, so an open drawer stays on its runners.
 
@@ -9,6 +9,14 @@ the *open* state (target joint at ``open_qpos``) as the part of the drawer's ins
 that has come out of the carcass, i.e. in front of the neighbouring drawer fronts,
 where an object can be dropped in from above. It runs from the drawer's floor to
 the top of its side walls.
+
+Door cabinet: an open-front carcass with shelves behind one or two overlay doors hinged
+at the outer edges (both hinge sides occur). A cabinet door's stop is hidden in its hinge,
+so no point cloud shows it; the stop is drawn from ``door_open_deg``, a range narrow
+enough (upper / lower <= 1.25) that one predicted angle lies within the 10% success
+tolerance of every stop in it, and wide enough to cover the common real stops (90-105
+deg, reached by clamping) and some wider ones. In-region: the compartment behind the
+target door (the half behind it for two doors) whose middle is nearest reach height.
 """
 
 from __future__ import annotations
@@ -18,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wpbench.assets.procedural import parts as P
-from wpbench.assets.procedural.blueprint import Blueprint, ModelBuilder, choose, uniform
+from wpbench.assets.procedural.blueprint import MIN_CAVITY_EXTENT, Blueprint, ModelBuilder, choose, uniform
 
 
 @dataclass(frozen=True)
@@ -34,9 +42,104 @@ class StorageRanges:
     open_fraction: tuple[float, float] = (0.80, 0.80)  # a fixed stop, unseen by the camera: see FridgeRanges.open_angle_deg
     drawer_mass: tuple[float, float] = (1.5, 4.0)
     min_opening: float = 0.25  # drawer opening height: a 16 cm block + drawer floor + margin
+    door_cabinet_share: float = 0.5
+    door_open_deg: tuple[float, float] = (105.0, 130.0)
+    door_mass: tuple[float, float] = (1.5, 4.0)
+    two_doors_min_width: float = 0.6
+    min_compartment: float = 0.24  # height between shelves, so a 16 cm block fits with margin
+    reach_height: float = 0.8
 
 
 def build(rng: np.random.Generator, object_id: str, ranges: StorageRanges = StorageRanges()) -> Blueprint:
+    """A door cabinet with probability ``ranges.door_cabinet_share``, else a chest of drawers."""
+    if rng.random() < ranges.door_cabinet_share:
+        return build_door_cabinet(rng, object_id, ranges)
+    return build_drawer_chest(rng, object_id, ranges)
+
+
+def _base(rng: np.random.Generator, b: ModelBuilder, D: float, W: float, wood, ranges: StorageRanges) -> tuple[bool, float]:
+    """Legs or a plinth under the carcass; returns (on_legs, base height)."""
+    on_legs = bool(rng.random() < 0.4)
+    if on_legs:
+        base_h = uniform(rng, *ranges.leg_height)
+        b.add_body(P.feet((-D / 2, D / 2), (-W / 2, W / 2), base_h, 0.04, bool(rng.random() < 0.5), wood, inset=0.01))
+    else:
+        base_h = uniform(rng, *ranges.plinth_height)
+        b.add_body(P.box_from_bounds((-D / 2 + 0.02, -W / 2 + 0.02, 0.0), (D / 2 - 0.03, W / 2 - 0.02, base_h), wood))
+    return on_legs, base_h
+
+
+def build_door_cabinet(rng: np.random.Generator, object_id: str, ranges: StorageRanges = StorageRanges()) -> Blueprint:
+    W, D, H = uniform(rng, *ranges.width), uniform(rng, *ranges.depth), uniform(rng, *ranges.height)
+    wall = uniform(rng, *ranges.wall)
+    door_t = uniform(rng, *ranges.front_thickness)
+    wood = choose(rng, P.WOODS + (P.WHITE, P.DARK_GREY))
+    front_colour = wood if rng.random() < 0.6 else choose(rng, P.WOODS + (P.WHITE,))
+    metal = choose(rng, (P.CHROME, P.BLACK, (0.70, 0.55, 0.25, 1.0)))
+    gap, xf = 0.003, D / 2
+    b = ModelBuilder(object_id, "furniture_body")
+    on_legs, base_h = _base(rng, b, D, W, wood, ranges)
+    walls, inside = P.open_front_shell((-D / 2, -W / 2, base_h), (xf, W / 2, base_h + H), wall, wall * 0.6, wood)
+    b.add_body(walls)
+
+    shelf_t = wall
+    shelf_bottoms = P.shelf_bottoms(rng, inside[0, 2], inside[1, 2], ranges.min_compartment, min_count=0, max_count=3)
+    for z in shelf_bottoms:
+        b.add_body(P.box_from_bounds((inside[0, 0], inside[0, 1], z), (xf - 0.01, inside[1, 1], z + shelf_t), wood))
+    floors = [inside[0, 2]] + [z + shelf_t for z in shelf_bottoms]
+    ceilings = shelf_bottoms + [inside[1, 2]]
+    compartments = [(lo, hi) for lo, hi in zip(floors, ceilings) if hi - lo >= MIN_CAVITY_EXTENT]
+    if not compartments:
+        raise ValueError(f"{object_id}: {inside[1, 2] - inside[0, 2]:.3f} m inside is too low for a compartment")
+    lo, hi = min(compartments, key=lambda c: abs((c[0] + c[1]) / 2 - ranges.reach_height))
+
+    two_doors = W >= ranges.two_doors_min_width and rng.random() < 0.5
+    z_range = (base_h, base_h + H)
+    if two_doors:
+        # The centre gap leaves room for the inner back corner's sideways sweep (see fridge).
+        mid_gap = door_t**2 / (W / 2) + 0.004
+        target_left = bool(rng.random() < 0.5)
+        door_specs = [("left", (-W / 2, -mid_gap / 2), target_left), ("right", (mid_gap / 2, W / 2), not target_left)]
+    else:
+        door_specs = [("left" if rng.random() < 0.5 else "right", (-W / 2, W / 2), True)]
+
+    open_angle = round(float(np.deg2rad(rng.uniform(*ranges.door_open_deg))), 4)
+    handle_kind = choose(rng, P.HANDLE_KINDS)
+    handle_high = bool(rng.random() < 0.5)
+    target = None
+    for hinge, y_range, is_target in door_specs:
+        door = P.hinged_door(hinge, xf, y_range, z_range, door_t, gap, front_colour)
+        y0, y1 = y_range
+        free_y = y1 - 0.05 if hinge == "left" else y0 + 0.05
+        door_h = z_range[1] - z_range[0]
+        hz = z_range[0] + (0.8 if handle_high else 0.5) * door_h
+        handle = P.make_handle(handle_kind, door.outer_x, free_y, hz, "z", min(0.25, door_h * 0.4), metal,
+                               standoff=0.03, radius=0.007)
+        link, joint = b.add_moving([door.slab, *handle.parts], "revolute", door.origin, door.axis, open_angle,
+                                   uniform(rng, *ranges.door_mass), "hinge door")
+        if is_target:
+            target = (link, joint, hinge, handle)
+    link, joint, target_hinge, handle = target
+
+    y_lo, y_hi = inside[0, 1], inside[1, 1]
+    if two_doors:  # only the half behind the opened door is reachable
+        y_lo, y_hi = (y_lo, -0.01) if target_hinge == "left" else (0.01, y_hi)
+    in_region = np.array([[inside[0, 0], y_lo, lo], [xf, y_hi, hi]])
+    extra = {
+        "style": "door_cabinet",
+        "hinge": target_hinge,
+        "doors": len(door_specs),
+        "shelves": len(shelf_bottoms),
+        "handle_type": handle.kind,
+        "handle_grasp_point": list(handle.grasp_point),
+        "on_legs": on_legs,
+        "wall_thickness": wall,
+        "door_thickness": door_t,
+    }
+    return Blueprint(b.model(), link, joint, "revolute", open_angle, in_region, extra)
+
+
+def build_drawer_chest(rng: np.random.Generator, object_id: str, ranges: StorageRanges = StorageRanges()) -> Blueprint:
     W, D, H = uniform(rng, *ranges.width), uniform(rng, *ranges.depth), uniform(rng, *ranges.height)
     wall = uniform(rng, *ranges.wall)
     front_t = uniform(rng, *ranges.front_thickness)
@@ -47,13 +150,7 @@ def build(rng: np.random.Generator, object_id: str, ranges: StorageRanges = Stor
     gap, xf = 0.003, D / 2
     b = ModelBuilder(object_id, "furniture_body")
 
-    on_legs = bool(rng.random() < 0.4)
-    if on_legs:
-        base_h = uniform(rng, *ranges.leg_height)
-        b.add_body(P.feet((-D / 2, D / 2), (-W / 2, W / 2), base_h, 0.04, bool(rng.random() < 0.5), wood, inset=0.01))
-    else:
-        base_h = uniform(rng, *ranges.plinth_height)
-        b.add_body(P.box_from_bounds((-D / 2 + 0.02, -W / 2 + 0.02, 0.0), (xf - 0.03, W / 2 - 0.02, base_h), wood))
+    on_legs, base_h = _base(rng, b, D, W, wood, ranges)
     walls, inside = P.open_front_shell((-D / 2, -W / 2, base_h), (xf, W / 2, base_h + H), wall, wall * 0.6, wood)
     b.add_body(walls)
 
@@ -127,6 +224,7 @@ def build(rng: np.random.Generator, object_id: str, ranges: StorageRanges = Stor
         "handle_grasp_point": list(handle.grasp_point),
         "on_legs": on_legs,
         "open_fraction": open_fraction,
+        "style": "drawer_chest",
         "in_region_state": "open",
         "wall_thickness": wall,
         "door_thickness": front_t,
