@@ -51,8 +51,8 @@ from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils.structs.types import SimConfig
 
-from wpbench.sim.executor import (BODY_STILL_ANG, BODY_STILL_LIN, JOINT_STILL_VEL, execute_articulated,
-                                  execute_free)
+from wpbench.sim.executor import (BODY_STILL_ANG, BODY_STILL_LIN, JOINT_STILL_VEL, STILL_STEPS, ObservedMotion,
+                                  execute_articulated, execute_free)
 from wpbench.sim.free_object import build_free_object, raw_body
 from wpbench.sim.furniture import SceneFurniture
 from wpbench.sim.camera_noise import apply_camera_noise
@@ -66,8 +66,8 @@ SIM_FREQ = 200
 METRIC_POINTS = 512        # surface samples of the action object used for the point metrics
 OPEN_TOLERANCE = 0.1       # docs/design.md: normalised distance to the open limit
 AT_REST_JOINT_SPEED = 0.05        # rad/s or m/s: a joint slower than this is at rest
-AT_REST_LINEAR_SPEED = 0.05       # m/s: a free object slower than this (and ...)
-AT_REST_ANGULAR_SPEED = 0.5       # rad/s: ... turning slower than this is at rest
+AT_REST_LINEAR_SPEED = 0.05       # m/s: a free object whose pose moved slower than this (and ...)
+AT_REST_ANGULAR_SPEED = 0.5       # rad/s: ... turned slower than this over each of its last STILL_STEPS steps is at rest
 CAMERA_FOV = 1.0           # rad, vertical
 CAMERA_NOISE_STREAM = 7       # tags the camera noise's random stream apart from the episode's others
 MESH_SAMPLES_PER_POINT = 4   # camera fallback: surface samples per observed point, before farthest-point sampling
@@ -277,6 +277,8 @@ class CrossPoseEnv(BaseEnv):
         self.stage_index = 0
         self.stage_results: list[dict] = []
         self.physics_steps = 0
+        # The free object's motion as its pose shows it, step by step (rest is judged from it).
+        self._free_motion = ObservedMotion(self.free_body, 1.0 / SIM_FREQ) if self.free_body is not None else None
         self._initialize_task(rng, options)
         # Both observation modes look from this viewpoint: the camera renders from it, the
         # mesh mode keeps the surface samples visible from it.
@@ -493,7 +495,11 @@ class CrossPoseEnv(BaseEnv):
 
     def _physics_step(self) -> None:
         self.furniture.hold()
-        self.scene.px.step()
+        motion = getattr(self, "_free_motion", None)
+        if motion is not None:
+            motion.observe(self.scene.px.step)
+        else:
+            self.scene.px.step()
         self.physics_steps += 1
         if self.physics_steps % SUCCESS_CHECK_STRIDE == 0 and self._stage_success(self._stage_state):
             self._success_seen = True
@@ -531,8 +537,7 @@ class CrossPoseEnv(BaseEnv):
         scene = Scene(self.gripper, self.scene, self.grasp, self._physics_step, 1.0 / SIM_FREQ,
                       velocities=lambda: [np.asarray(body.linear_velocity), np.asarray(body.angular_velocity),
                                           np.asarray(body.entity_pose.p)],
-                      is_still=lambda: np.linalg.norm(body.linear_velocity) < BODY_STILL_LIN
-                      and np.linalg.norm(body.angular_velocity) < BODY_STILL_ANG,
+                      is_still=lambda: bool(self._free_motion.still(BODY_STILL_LIN, BODY_STILL_ANG)),
                       held_touches_furniture=self._free_object_touches_furniture)
         anchor = self.get_obs()["anchor_points"][0].numpy().astype(np.float64)
         # The robot knows where its own camera stood (the viewpoint of both observation modes).
@@ -555,8 +560,7 @@ class CrossPoseEnv(BaseEnv):
         scene = ArmScene(self.arm, ArmPlanner.shared(), self.scene, self.grasp, self._physics_step, 1.0 / SIM_FREQ,
                          velocities=lambda: [np.asarray(body.linear_velocity), np.asarray(body.angular_velocity),
                                              np.asarray(body.entity_pose.p)],
-                         is_still=lambda: np.linalg.norm(body.linear_velocity) < BODY_STILL_LIN
-                         and np.linalg.norm(body.angular_velocity) < BODY_STILL_ANG,
+                         is_still=lambda: bool(self._free_motion.still(BODY_STILL_LIN, BODY_STILL_ANG)),
                          held_touches_furniture=self._free_object_touches_furniture)
         return execute_free_panda(scene, action, anchor, T, viewpoint=np.asarray(self.view_eye, dtype=np.float64))
 
@@ -642,9 +646,19 @@ class CrossPoseEnv(BaseEnv):
         center, rotation, half = self.furniture.in_region_world(self.root_pose)
         centroid = transform_points(pose_to_matrix(self.free_body.entity_pose), self.free_mesh.center_mass[None])[0]
         local = rotation.T @ (centroid - center)
-        at_rest = (np.linalg.norm(self.free_body.linear_velocity) < AT_REST_LINEAR_SPEED
-                   and np.linalg.norm(self.free_body.angular_velocity) < AT_REST_ANGULAR_SPEED)
-        return bool(np.all(np.abs(local) <= half) and at_rest)
+        return bool(np.all(np.abs(local) <= half) and self.free_object_at_rest())
+
+    def free_object_at_rest(self) -> bool:
+        """The free object's pose moved slower than AT_REST_LINEAR_SPEED and turned slower than
+        AT_REST_ANGULAR_SPEED over each of its last STILL_STEPS physics steps. The pose, not
+        PhysX's reported velocity, decides (``wpbench.sim.executor.ObservedMotion``); before the
+        first physics step of an episode there is no motion to see and the reported velocity is used."""
+        motion = getattr(self, "_free_motion", None)
+        still = motion.still(AT_REST_LINEAR_SPEED, AT_REST_ANGULAR_SPEED, steps=STILL_STEPS) if motion else None
+        if still is not None:
+            return still
+        return bool(np.linalg.norm(self.free_body.linear_velocity) < AT_REST_LINEAR_SPEED
+                    and np.linalg.norm(self.free_body.angular_velocity) < AT_REST_ANGULAR_SPEED)
 
     def _stage_success(self, state: StageState) -> bool:
         return self.door_open(state.q_start) if state.kind == ARTICULATED else self.free_object_inside()

@@ -7,7 +7,10 @@ cross-pose differs between policies.
   swing it), simulate until still.
 - Free-floating: move the object to the predicted pose, release it, simulate
   until it rests. Physics decides: a pose inside a wall is pushed out, and that
-  counts.
+  counts. A free body's rest is judged from the pose it shows over its physics
+  steps (:class:`ObservedMotion`), not from the velocity PhysX reports: a block
+  wedged between two held drawers keeps a reported 0.1 m/s and 2 rad/s while its
+  pose does not move (storage 45332).
 
 A simulation that blows up (NaN, runaway velocities) ends as a failure with a
 reason; it never raises.
@@ -15,10 +18,12 @@ reason; it never raises.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
+import sapien
 from sapien import physx
 from scipy.optimize import minimize_scalar
 
@@ -108,6 +113,52 @@ def simulate_until_still(
     return ExecutionResult(ok=True, reason=NOT_AT_REST, detail="did not come to rest", sim_seconds=n_max * timestep, at_rest=False)
 
 
+def step_speeds(before: sapien.Pose, after: sapien.Pose, timestep: float) -> tuple[float, float]:
+    """(m/s, rad/s): how fast a body moved over one physics step of ``timestep`` s, from
+    the world poses of its mass centre before and after the step."""
+    turn = (after * before.inv()).q                 # (w, x, y, z)
+    angle = 2.0 * np.arctan2(np.linalg.norm(turn[1:]), abs(turn[0]))
+    return float(np.linalg.norm(after.p - before.p)) / timestep, float(angle) / timestep
+
+
+class ObservedMotion:
+    """The speeds a rigid body's pose showed over its last ``window`` physics steps.
+
+    Rest is judged from these, not from ``linear_velocity`` / ``angular_velocity``: PhysX
+    can report a velocity a body does not move with (a block pinched between two driven
+    drawers reported 0.1 m/s and 2 rad/s every step while its pose changed by 1e-7 m in
+    4 s), and a body that moves shows it in its pose whatever velocity is reported.
+    ``steps(step)`` wraps a physics step so that each call records the step's motion; a
+    pose set between steps (a teleport) is not motion.
+    """
+
+    def __init__(self, body: physx.PhysxRigidDynamicComponent, timestep: float, window: int = STILL_STEPS):
+        self.body = body
+        self.timestep = timestep
+        self.speeds: deque[tuple[float, float]] = deque(maxlen=window)
+
+    def _mass_centre(self) -> sapien.Pose:
+        return self.body.entity_pose * self.body.cmass_local_pose
+
+    def observe(self, step: Callable[[], None]) -> None:
+        """Run one physics ``step`` and record how fast the body moved over it."""
+        before = self._mass_centre()
+        step()
+        self.speeds.append(step_speeds(before, self._mass_centre(), self.timestep))
+
+    def steps(self, step: Callable[[], None]) -> Callable[[], None]:
+        """``step`` that also records each step's motion."""
+        return lambda: self.observe(step)
+
+    def still(self, linear: float, angular: float, steps: int = 1) -> bool | None:
+        """The last ``steps`` recorded steps (fewer if fewer were recorded) all moved slower than
+        ``linear`` m/s and turned slower than ``angular`` rad/s; None when none was recorded."""
+        if not self.speeds:
+            return None
+        recent = list(self.speeds)[-steps:]
+        return all(v < linear and w < angular for v, w in recent)
+
+
 def execute_articulated(
     furniture: SceneFurniture,
     cross_pose: np.ndarray,
@@ -147,19 +198,20 @@ def execute_free(
     step: Callable[[], None],
     timestep: float,
 ) -> ExecutionResult:
-    """Teleport the free object by ``cross_pose``, release it and let it settle."""
+    """Teleport the free object by ``cross_pose``, release it and let it settle: at rest once
+    its pose has moved slower than BODY_STILL_LIN / BODY_STILL_ANG for STILL_STEPS steps."""
     goal = cross_pose @ pose_to_matrix(body.entity_pose)
     body.set_max_depenetration_velocity(MAX_DEPENETRATION_SPEED)
     body.entity.set_pose(matrix_to_pose(goal))
     body.set_linear_velocity(np.zeros(3))
     body.set_angular_velocity(np.zeros(3))
     body.wake_up()
+    motion = ObservedMotion(body, timestep)
     result = simulate_until_still(
-        step,
+        motion.steps(step),
         timestep,
         velocities=lambda: [np.asarray(body.linear_velocity), np.asarray(body.angular_velocity), np.asarray(body.entity_pose.p)],
-        is_still=lambda: np.linalg.norm(body.linear_velocity) < BODY_STILL_LIN
-        and np.linalg.norm(body.angular_velocity) < BODY_STILL_ANG,
+        is_still=lambda: bool(motion.still(BODY_STILL_LIN, BODY_STILL_ANG)),
     )
     result.details.update(placed_pose=goal.tolist())
     return result
