@@ -51,8 +51,13 @@ class StorageRanges:
 
 
 def build(rng: np.random.Generator, object_id: str, ranges: StorageRanges = StorageRanges()) -> Blueprint:
-    """A door cabinet with probability ``ranges.door_cabinet_share``, else a chest of drawers."""
-    if rng.random() < ranges.door_cabinet_share:
+    """A door cabinet with probability ``ranges.door_cabinet_share``, else a chest of drawers.
+
+    The choice comes from a stream spawned off ``rng``'s seed, which leaves ``rng`` untouched:
+    an instance that is a chest is the same chest it was before door cabinets existed.
+    """
+    style_rng = np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0])
+    if style_rng.random() < ranges.door_cabinet_share:
         return build_door_cabinet(rng, object_id, ranges)
     return build_drawer_chest(rng, object_id, ranges)
 
