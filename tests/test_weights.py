@@ -141,6 +141,28 @@ def test_wpbench_train_select_best_still_chooses_wp(wpbench_exe, runs, tmp_path)
     assert json.loads((root / "best.json").read_text())["policy"] == "wp-postsvd"
 
 
+def test_best_json_is_not_chosen_between_variants_validated_on_different_data(wpbench_exe, runs, tmp_path):
+    root = tmp_path / "weights"
+    weights.promote(runs / "wp-postsvd", root)
+    before = (root / "best.json").read_text()
+    other = _copy_run(runs, "wp-postsvd", tmp_path)
+    config = json.loads((other / weights.CONFIG_FILE).read_text())
+    config["policy"] = "wp-og"
+    config["data"]["val_manifest_hash"] = "0000000000000000"
+    (other / weights.CONFIG_FILE).write_text(json.dumps(config))
+    shutil.copytree(other, root / "wp-og")
+    with pytest.raises(ValueError, match="validated on different data.*retrain them on the same data"):
+        weights.select_best(root)
+    assert (root / "best.json").read_text() == before
+    refused = subprocess.run([str(wpbench_exe), "train", "--select-best", "--weights-root", str(root)],
+                             capture_output=True, text=True)
+    assert refused.returncode == 2 and refused.stderr.count("\n") == 1 and "different data" in refused.stderr
+    assert (root / "best.json").read_text() == before
+    shipped = weights.promote(runs / "wp-postsvd", root)  # shipping still works; the choice is left alone
+    assert shipped["best"] is None and "different data" in shipped["best_unchanged"]
+    assert (root / "best.json").read_text() == before
+
+
 def _break_metrics(run: Path, change) -> None:
     path = run / weights.METRICS_FILE
     metrics = json.loads(path.read_text())

@@ -205,9 +205,19 @@ def best_weighted_pose(weights_root: Path | None = None) -> str:
     return name
 
 
+def _val_data_of(weights_dir: Path) -> str | None:
+    """The val manifest hash a trained policy's validation errors were measured on (None if unrecorded)."""
+    try:
+        data = json.loads((weights_dir / CONFIG_FILE).read_text()).get("data")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return data.get("val_manifest_hash") if isinstance(data, dict) else None
+
+
 def select_best(weights_root: Path | None = None) -> dict | None:
     """Write ``best.json`` naming the trained variant with the lowest ``CRITERION`` in its
-    metrics.json; None (and no file written) if no variant is trained."""
+    metrics.json; None (and no file written) if no variant is trained. ValueError (and no file
+    written) if the variants' errors were measured on different val data: they do not compare."""
     weights_root = weights_root_or_shipped(weights_root)
     candidates: dict[str, float] = {}
     for name in WEIGHTED_POSE_VARIANTS:
@@ -222,6 +232,11 @@ def select_best(weights_root: Path | None = None) -> dict | None:
             candidates[name] = value
     if not candidates:
         return None
+    val_data = {name: _val_data_of(weights_root / name) for name in candidates}
+    if len(set(val_data.values())) > 1:
+        listed = ", ".join(f"{name} on val data {val_data[name]}" for name in sorted(val_data))
+        raise ValueError(f"the WeightedPose variants under {weights_root} were validated on different data ({listed}), "
+                         "so their errors do not compare; retrain them on the same data, then `wpbench train --select-best`")
     best = min(candidates, key=candidates.get)
     record = {"policy": best, "criterion": f"{CRITERION} (lower is better)", "candidates": candidates}
     atomic_write_text(weights_root / BEST_FILE, json.dumps(record, indent=2, sort_keys=True) + "\n")
@@ -299,8 +314,8 @@ def promote(run_dir: Path, weights_root: Path | None = None) -> dict:
     The files (model.pt, config.json, metrics.json and the training records) are copied into a
     temporary folder beside the target, which then takes the target's place by renames, so the
     folder never holds a mix of old and new files (the old ones are restored if the rename fails). For a WeightedPose variant ``best.json`` is chosen
-    again. Returns {"policy", "weights_dir", "model_hash", "best"} (best: the best.json record
-    or None).
+    again. Returns {"policy", "weights_dir", "model_hash", "best", "best_unchanged"} (best: the
+    best.json record or None; best_unchanged: why best.json was left as it was, or None).
     """
     run_dir = Path(run_dir)
     config = check_run(run_dir)
@@ -329,5 +344,11 @@ def promote(run_dir: Path, weights_root: Path | None = None) -> dict:
     finally:
         shutil.rmtree(staging, ignore_errors=True)
         shutil.rmtree(replaced, ignore_errors=True)
-    best = select_best(weights_root) if policy in WEIGHTED_POSE_VARIANTS else None
-    return {"policy": policy, "weights_dir": target, "model_hash": config["model_hash"], "best": best}
+    best, best_unchanged = None, None
+    if policy in WEIGHTED_POSE_VARIANTS:
+        try:
+            best = select_best(weights_root)
+        except ValueError as err:  # the weights are shipped; best.json stays as it was
+            best_unchanged = str(err)
+    return {"policy": policy, "weights_dir": target, "model_hash": config["model_hash"], "best": best,
+            "best_unchanged": best_unchanged}

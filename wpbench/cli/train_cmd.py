@@ -88,7 +88,11 @@ def train(
         from wpbench.weights import weights_root_or_shipped
 
         weights_root = weights_root_or_shipped(weights_root)
-        best = choose(weights_root)
+        try:
+            best = choose(weights_root)
+        except ValueError as err:
+            typer.echo(f"Error: {err}", err=True)
+            raise typer.Exit(2)
         if best is None:
             typer.echo(f"Error: no trained WeightedPose variant under {weights_root}; "
                        "train one with `wpbench train --policy wp-postsvd-t` and ship it with `--promote`", err=True)
@@ -135,6 +139,8 @@ def _promote(run_dir: Path, weights_root: Path | None) -> None:
     typer.echo(f"promoted {shipped['policy']} (model_hash {shipped['model_hash']}): {run_dir} -> {shipped['weights_dir']}")
     typer.echo(f"  {_data_line(Path(shipped['weights_dir']))}")
     best = shipped["best"]
+    if shipped["best_unchanged"]:
+        typer.echo(f"Warning: best.json left as it was: {shipped['best_unchanged']}", err=True)
     if best is not None:
         typer.echo(f"best WeightedPose variant: {best['policy']} ({best['criterion']}: {best['candidates']})")
 
