@@ -57,11 +57,13 @@ def populated_results(tmp_results):
     return tmp_results
 
 
-def test_finds_summaries_recursively_and_skips_hidden_folders(populated_results):
+def test_finds_summaries_recursively_and_skips_hidden_and_archived_folders(populated_results):
     add_run(populated_results, ".scratch/wp", "wp", "open", 1, 1)
+    add_run(populated_results, "archive/generator-v2/runs/wp", "wp", "open", 1, 1)
+    add_run(populated_results, "archived/wp", "wp", "open", 1, 1)  # only a folder named exactly "archive"
     found = find_summaries(populated_results)
-    assert len(found) == 5
-    assert all(".scratch" not in str(path) for path in found)
+    assert len(found) == 6
+    assert all(".scratch" not in str(path) and "/archive/" not in str(path) for path in found)
 
 
 def test_collected_table_has_one_row_per_run_with_its_numbers(populated_results):

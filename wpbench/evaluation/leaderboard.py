@@ -87,15 +87,21 @@ class LeaderboardFiles:
     skipped: tuple[Path, ...] = ()
 
 
+# Runs of earlier releases (other furniture or weights) are kept under this folder name; the
+# leaderboard leaves them out, since their numbers are not comparable with the current ones.
+ARCHIVE_DIR = "archive"
+
+
 def find_summaries(results_dir: str | os.PathLike[str]) -> list[Path]:
-    """All ``summary.json`` files under ``results_dir`` (sorted, hidden dirs skipped)."""
+    """All ``summary.json`` files under ``results_dir`` (sorted; hidden folders and
+    :data:`ARCHIVE_DIR` folders skipped)."""
     root = Path(results_dir)
     if not root.is_dir():
         raise FileNotFoundError(f"results folder {root} does not exist; run `wpbench run ...` first")
     found = []
     for path in root.rglob(SUMMARY_FILE):
         relative_parts = path.relative_to(root).parts
-        if any(part.startswith(".") for part in relative_parts):
+        if any(part.startswith(".") or part == ARCHIVE_DIR for part in relative_parts[:-1]):
             continue
         found.append(path)
     return sorted(found)
