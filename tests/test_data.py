@@ -247,3 +247,56 @@ def test_two_workers_write_the_same_shards_as_one(tmp_path):
                 else:
                     assert np.array_equal(one[key], two[key]), key
     assert read_manifest(tmp_path / "parallel" / "train")["counts"] == {ARTICULATED: 4, FREE: 4}
+
+
+def _rebuild_manifest(directory) -> dict:
+    """Rewrite ``directory``'s manifest from its shards, with the config it was generated with."""
+    from wpbench.data.manifest import build_manifest, write_manifest
+
+    recorded = read_manifest(directory)["config"]
+    config = GenerationConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in recorded.items()})
+    manifest = build_manifest(directory, config)
+    write_manifest(directory, manifest)
+    return manifest
+
+
+def test_content_hash_tells_apart_data_written_with_the_same_options(tmp_path):
+    from wpbench.data.shards import write_shard
+
+    for name in ("one", "two"):
+        write_synthetic_split(tmp_path / name, "val", per_kind=3, num_action_points=16, num_anchor_points=24)
+    # Same options, same fingerprint, other furniture: one free sample's anchor cloud moves.
+    path = shard_path(tmp_path / "two" / "val", FREE, 0)
+    arrays = read_shard(path)
+    arrays["anchor_points"][1] += np.float32(0.05)
+    write_shard(path, arrays)
+    manifests = {name: _rebuild_manifest(tmp_path / name / "val") for name in ("one", "two")}
+    assert manifests["one"]["fingerprint"] == manifests["two"]["fingerprint"]
+    assert manifests["one"]["shards"][0] == manifests["two"]["shards"][0]  # the articulated shards are the same
+    assert manifests["one"]["content_hash"] != manifests["two"]["content_hash"]
+    for kinds in ((ARTICULATED, FREE), (FREE,)):
+        one, two = (CrossPoseDataset(tmp_path / name / "val", kinds).content_hash for name in ("one", "two"))
+        assert one != two, kinds
+        assert one == CrossPoseDataset(tmp_path / "one" / "val", kinds).content_hash  # the same data, the same hash
+    # A dataset of only the shards both sets share has one hash.
+    assert (CrossPoseDataset(tmp_path / "one" / "val", (ARTICULATED,)).content_hash
+            == CrossPoseDataset(tmp_path / "two" / "val", (ARTICULATED,)).content_hash)
+
+
+def test_data_written_before_shards_stored_digests_loads_with_the_same_hashes(tmp_path):
+    from wpbench.data.manifest import write_manifest
+    from wpbench.data.shards import DIGEST_KEY, array_digest
+
+    current = write_synthetic_split(tmp_path, "train", per_kind=3, num_action_points=16, num_anchor_points=24)
+    hash_now = CrossPoseDataset(tmp_path / "train").content_hash
+    for entry in current["shards"]:
+        path = tmp_path / "train" / entry["path"]
+        arrays = read_shard(path)
+        assert entry["digest"] == str(arrays[DIGEST_KEY]) == array_digest(arrays)
+        with open(path, "wb") as handle:  # an older shard: no digest inside
+            np.savez_compressed(handle, **{k: v for k, v in arrays.items() if k != DIGEST_KEY})
+    old_style = {**current, "shards": [{k: v for k, v in e.items() if k != "digest"} for e in current["shards"]]}
+    write_manifest(tmp_path / "train", old_style)
+    old = CrossPoseDataset(tmp_path / "train")
+    assert len(old) == 6 and old.content_hash == hash_now
+    assert _rebuild_manifest(tmp_path / "train")["content_hash"] == current["content_hash"]

@@ -11,7 +11,10 @@ float32 holds every sample's equally correct goals (``equivalent_goals``; row 0
 is ``gt_transform``, short rows repeat it; K = 1 for data without symmetric
 objects or made before shards stored ``action_pose``). ``categories`` / ``object_ids``
 are kept as lists beside the tensors for per-category reporting; ``content_hash``
-identifies exactly the shards loaded (a resumed training run checks it).
+identifies exactly the samples loaded: the fingerprint and, per shard loaded, its path,
+kind, count and the sha256 of its arrays (``shards.array_digest``, computed from the arrays
+read, so a manifest written before shards stored digests gives the same hash). A resumed
+training run checks it.
 
 ``ConcatenatedSamples`` holds several such datasets as one (a training that mixes data
 sets, ``wpbench.training.data_mix``).
@@ -30,7 +33,7 @@ from torch.utils.data import Dataset
 from wpbench.data.config import KIND_CODE, KINDS
 from wpbench.data.equivalent_goals import equivalent_goals
 from wpbench.data.manifest import check_not_test_data, read_manifest
-from wpbench.data.shards import read_shard
+from wpbench.data.shards import DIGEST_KEY, array_digest, read_shard
 
 
 class CrossPoseDataset(Dataset):
@@ -52,11 +55,14 @@ class CrossPoseDataset(Dataset):
         used = []
         for entry in self.manifest["shards"]:
             if entry["kind"] in parts:
-                parts[entry["kind"]].append(read_shard(self.directory / entry["path"]))
-                used.append(entry)
+                shard = read_shard(self.directory / entry["path"])
+                parts[entry["kind"]].append(shard)
+                used.append({key: entry[key] for key in ("path", "kind", "count")} | {"digest": array_digest(shard)})
         # Identifies exactly the samples loaded (shards of other kinds may still be growing).
-        content = json.dumps({"fingerprint": self.manifest["fingerprint"], "shards": used}, sort_keys=True)
-        self.content_hash = hashlib.sha256(content.encode()).hexdigest()[:16]
+        identity = {"fingerprint": self.manifest["fingerprint"], "shards": used}
+        if limit_per_kind is not None:
+            identity["limit_per_kind"] = limit_per_kind
+        self.content_hash = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:16]
         arrays: list[dict[str, np.ndarray]] = []
         for kind in kinds:
             if not parts[kind]:
@@ -64,7 +70,8 @@ class CrossPoseDataset(Dataset):
                     f"{self.directory} has no {kind} samples; generate them with "
                     f"`wpbench data generate --out {self.directory.parent} --split {self.directory.name}`"
                 )
-            merged = {key: np.concatenate([p[key] for p in parts[kind]]) for key in parts[kind][0] if key != "fingerprint"}
+            merged = {key: np.concatenate([p[key] for p in parts[kind]]) for key in parts[kind][0]
+                      if key not in ("fingerprint", DIGEST_KEY)}
             if limit_per_kind is not None:
                 merged = {key: value[:limit_per_kind] for key, value in merged.items()}
             arrays.append(merged)

@@ -4,7 +4,9 @@ It is rebuilt from the shard files on disk (never edited incrementally), so
 two generator processes working on different kinds of the same split, or a
 run that was interrupted, always leave a manifest that describes exactly the
 shards that exist. ``content_hash`` identifies the data a model was trained
-on (it goes into the model's ``config.json``).
+on (it goes into the model's ``config.json``): it hashes the config fingerprint and
+every shard's path, kind, count and ``digest`` (the shard's ``content_digest``, a sha256
+of its arrays), so data written with the same options from other furniture differs in it.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from wpbench.data.config import KINDS, SPLITS, GenerationConfig
-from wpbench.data.shards import read_shard
+from wpbench.data.shards import read_shard, shard_digest
 
 MANIFEST_NAME = "manifest.json"
 FORMAT_VERSION = 1
@@ -83,7 +85,8 @@ def build_manifest(directory: Path, config: GenerationConfig, generation: dict[s
         data = read_shard(path, ("category", "fingerprint"))
         kind = path.parent.name
         count = len(data["category"])
-        shards.append({"path": str(path.relative_to(directory)), "kind": kind, "count": count})
+        shards.append({"path": str(path.relative_to(directory)), "kind": kind, "count": count,
+                       "digest": shard_digest(path)})
         by_kind[kind] += count
         by_category[kind].update(str(c) for c in data["category"])
         fingerprints.add(str(data["fingerprint"]))

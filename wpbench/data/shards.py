@@ -17,10 +17,16 @@ Schema (S samples, NA action points, NB anchor points):
 | ``start_fraction`` | (S,) | float32 | articulated start, fraction closed->open (NaN for free) |
 | ``camera_fallback`` | (S,) | bool | the camera missed an object and the task used mesh samples |
 | ``fingerprint`` | () | str | ``GenerationConfig.sample_fingerprint()`` of the writer |
+| ``content_digest`` | () | str | ``array_digest`` of every other array, set by ``write_shard`` (absent in older shards) |
+
+``content_digest`` identifies what the shard holds: two shards written with the same
+options from different furniture (or a different generator version) differ in it. The
+manifest and the dataset hash it, so their ``content_hash`` identifies the samples.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 from pathlib import Path
 
@@ -30,6 +36,8 @@ ARRAY_KEYS = (
     "action_points", "anchor_points", "gt_transform", "gt_transform_raw", "action_pose", "kind", "category",
     "object_id", "free_object", "seed", "start_fraction", "camera_fallback",
 )
+
+DIGEST_KEY = "content_digest"
 
 
 def shard_path(split_dir: Path, kind: str, index: int) -> Path:
@@ -54,9 +62,22 @@ def stack_samples(samples: list[dict], fingerprint: str) -> dict[str, np.ndarray
     return out
 
 
+def array_digest(arrays: dict[str, np.ndarray]) -> str:
+    """sha256 (hex) of a shard's arrays other than ``content_digest``: each key's name, dtype,
+    shape and bytes, keys sorted. Depends on the values only, not on how the file compresses them."""
+    digest = hashlib.sha256()
+    for key in sorted(k for k in arrays if k != DIGEST_KEY):
+        value = np.ascontiguousarray(arrays[key])
+        digest.update(f"{key}|{value.dtype.str}|{value.shape}|".encode())
+        digest.update(value)
+    return digest.hexdigest()
+
+
 def write_shard(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write ``arrays`` to ``path`` atomically: a reader sees the whole shard or none."""
+    """Write ``arrays`` to ``path`` atomically, with their ``content_digest``: a reader sees the
+    whole shard or none."""
     path = Path(path)
+    arrays = {**{k: v for k, v in arrays.items() if k != DIGEST_KEY}, DIGEST_KEY: np.asarray(array_digest(arrays))}
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + f".tmp{os.getpid()}")
     with open(tmp, "wb") as handle:
@@ -80,3 +101,18 @@ def read_shard(path: Path, keys: tuple[str, ...] | None = None) -> dict[str, np.
         raise ValueError(
             f"cannot read shard {path}: {err}. Delete it and rerun `wpbench data generate` to rewrite it"
         ) from err
+
+
+def shard_digest(path: Path) -> str:
+    """The ``content_digest`` a shard stores, or for a shard written before shards stored one,
+    ``array_digest`` of its arrays (the whole file is read)."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if DIGEST_KEY in data.files:
+                return str(data[DIGEST_KEY])
+    except (OSError, EOFError, ValueError) as err:
+        raise ValueError(
+            f"cannot read shard {path}: {err}. Delete it and rerun `wpbench data generate` to rewrite it"
+        ) from err
+    return array_digest(read_shard(path))
