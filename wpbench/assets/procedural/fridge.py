@@ -58,7 +58,7 @@ def build(rng: np.random.Generator, object_id: str, ranges: FridgeRanges = Fridg
     b.add_body(walls, P.interior_lining(inside, P.WHITE))
 
     fridge_lo, fridge_hi = inside[0, 2], inside[1, 2]
-    door_specs = []  # (hinge, y_range, z_range, is_target)
+    door_specs: list[P.DoorSpec] = []
     hinge = "left" if rng.random() < 0.5 else "right"
     top = foot_h + H
     if style == "top_freezer":
@@ -92,25 +92,12 @@ def build(rng: np.random.Generator, object_id: str, ranges: FridgeRanges = Fridg
 
     open_angle = round(float(np.deg2rad(rng.uniform(*ranges.open_angle_deg))), 4)
     handle_kind = choose(rng, ("bar", "bar", "recessed", "knob"))
-    target = None
-    for d_hinge, y_range, z_range, is_target in door_specs:
-        door = P.hinged_door(d_hinge, xf, y_range, z_range, door_t, gap, finish)
-        y0, y1 = y_range
-        free_y = y1 - 0.05 if d_hinge == "left" else y0 + 0.05
-        z0, z1 = z_range
-        door_h = z1 - z0
-        if style == "top_freezer":
-            hz = z0 + 0.75 * door_h if is_target else z0 + 0.3 * door_h
-        else:
-            hz = z0 + 0.6 * door_h
-        length = min(0.6, door_h * 0.5)
-        handle = P.make_handle(handle_kind, door.outer_x, free_y, hz, "z", length, handle_colour,
-                               standoff=0.045, radius=0.012)
-        link, joint = b.add_moving([door.slab, *handle.parts], "revolute", door.origin, door.axis, open_angle,
-                                   uniform(rng, *ranges.door_mass), "hinge door")
-        if is_target:
-            target = (link, joint, d_hinge, handle)
-    link, joint, target_hinge, handle = target
+    # A top-freezer's fridge (target) door has its handle near its top, the freezer door near its bottom.
+    handle_height = (0.75, 0.3) if style == "top_freezer" else (0.6, 0.6)
+    masses = [uniform(rng, *ranges.door_mass) for _ in door_specs]  # drawn in door order
+    link, joint, target_hinge, handle = P.add_side_hinged_doors_with_handles(
+        b, door_specs, masses, xf, door_t, gap, finish, open_angle, handle_kind, handle_colour,
+        handle_height=handle_height, handle_length=(0.5, 0.6), standoff=0.045, radius=0.012)
 
     y_lo, y_hi = inside[0, 1], inside[1, 1]
     if style == "french":  # only the half behind the opened door is reachable

@@ -14,12 +14,16 @@ The hinge line sits on the door's *outer* face, so the door never sweeps into th
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
 from wpbench.assets.procedural.writer import RGBA, Box, Cylinder, Part, Vec3
+
+if TYPE_CHECKING:  # blueprint imports this module, so the builder's type is named for annotations only
+    from wpbench.assets.procedural.blueprint import ModelBuilder
 
 HingeSide = Literal["left", "right", "bottom"]
 HandleKind = Literal["bar", "knob", "recessed"]
@@ -161,6 +165,56 @@ def make_handle(
     else:
         raise ValueError(f"handle kind must be one of {HANDLE_KINDS}, got {kind!r}")
     return Handle(parts, kind, grasp, direction)
+
+
+# One side-hinged door: hinge side, y extent, z extent, and whether it is the task's target door.
+DoorSpec = tuple[HingeSide, tuple[float, float], tuple[float, float], bool]
+
+
+def add_side_hinged_doors_with_handles(
+    b: ModelBuilder,
+    doors: Sequence[DoorSpec],
+    masses: Sequence[float],
+    front_x: float,
+    thickness: float,
+    gap: float,
+    rgba: RGBA,
+    open_angle: float,
+    handle_kind: HandleKind,
+    handle_rgba: RGBA,
+    handle_height: tuple[float, float],
+    handle_length: tuple[float, float],
+    standoff: float,
+    radius: float,
+) -> tuple[str, str, HingeSide, Handle]:
+    """Add each door of ``doors`` to ``b`` as a revolute link opening to ``open_angle``, with an
+    upright handle 5 cm in from its free edge; return the target door's (link, joint, hinge, handle).
+
+    ``masses`` holds one link mass per door, in the order of ``doors``. ``handle_height`` places
+    the handle's centre at that fraction of the door's height above its bottom edge, the first
+    value on the target door and the second on the others; ``handle_length`` is (fraction of
+    the door's height, longest handle). The doors hang as :func:`hinged_door` says.
+    """
+    if len(masses) != len(doors):
+        raise ValueError(f"{len(doors)} doors but {len(masses)} masses")
+    target = None
+    for (hinge, y_range, z_range, is_target), mass in zip(doors, masses):
+        door = hinged_door(hinge, front_x, y_range, z_range, thickness, gap, rgba)
+        y0, y1 = y_range
+        free_y = y1 - 0.05 if hinge == "left" else y0 + 0.05
+        z0, z1 = z_range
+        door_h = z1 - z0
+        hz = z0 + (handle_height[0] if is_target else handle_height[1]) * door_h
+        length = min(handle_length[1], door_h * handle_length[0])
+        handle = make_handle(handle_kind, door.outer_x, free_y, hz, "z", length, handle_rgba,
+                             standoff=standoff, radius=radius)
+        link, joint = b.add_moving([door.slab, *handle.parts], "revolute", door.origin, door.axis, open_angle,
+                                   mass, "hinge door")
+        if is_target:
+            target = (link, joint, hinge, handle)
+    if target is None:
+        raise ValueError("no door is marked as the target")
+    return target
 
 
 def shelf_bottoms(rng: np.random.Generator, z0: float, z1: float, min_gap: float, min_count: int = 1,

@@ -27,6 +27,7 @@ import numpy as np
 
 from wpbench.assets.procedural import parts as P
 from wpbench.assets.procedural.blueprint import MIN_CAVITY_EXTENT, Blueprint, ModelBuilder, choose, uniform
+from wpbench.assets.procedural.writer import RGBA
 
 
 @dataclass(frozen=True)
@@ -62,6 +63,10 @@ def build(rng: np.random.Generator, object_id: str, ranges: StorageRanges = Stor
     return build_drawer_chest(rng, object_id, ranges)
 
 
+# Clearance between the carcass front and the door or drawer fronts laid over it.
+FRONT_GAP = 0.003
+
+
 def _base(rng: np.random.Generator, b: ModelBuilder, D: float, W: float, wood, ranges: StorageRanges) -> tuple[bool, float]:
     """Legs or a plinth under the carcass; returns (on_legs, base height)."""
     on_legs = bool(rng.random() < 0.4)
@@ -74,19 +79,50 @@ def _base(rng: np.random.Generator, b: ModelBuilder, D: float, W: float, wood, r
     return on_legs, base_h
 
 
-def build_door_cabinet(rng: np.random.Generator, object_id: str, ranges: StorageRanges = StorageRanges()) -> Blueprint:
+@dataclass
+class _Carcass:
+    """The open-front wooden box both storage styles start from, and the finishes of its fronts."""
+
+    b: ModelBuilder  # holds the base and the shell walls so far
+    W: float
+    H: float  # shell height, above the base
+    wall: float
+    front_t: float  # thickness of the door or drawer fronts
+    drawer_wall: float | None  # drawer box wall thickness, drawn for chests only
+    wood: RGBA
+    front_colour: RGBA
+    metal: RGBA  # handle colour
+    xf: float  # x of the shell's open front
+    on_legs: bool
+    base_h: float
+    inside: np.ndarray  # (2, 3) bounds of the hollow inside
+
+
+def _storage_carcass(rng: np.random.Generator, object_id: str, ranges: StorageRanges, drawer_wall: bool) -> _Carcass:
+    """Draw the sizes and finishes of a storage carcass and build its base and open-front shell.
+
+    The draws come in this order: width, depth, height, wall, front thickness, the drawer box wall
+    (only if ``drawer_wall``), wood, front colour, handle metal, then the base.
+    """
     W, D, H = uniform(rng, *ranges.width), uniform(rng, *ranges.depth), uniform(rng, *ranges.height)
     wall = uniform(rng, *ranges.wall)
-    door_t = uniform(rng, *ranges.front_thickness)
+    front_t = uniform(rng, *ranges.front_thickness)
+    dwall = uniform(rng, *ranges.drawer_wall) if drawer_wall else None
     wood = choose(rng, P.WOODS + (P.WHITE, P.DARK_GREY))
     front_colour = wood if rng.random() < 0.6 else choose(rng, P.WOODS + (P.WHITE,))
     metal = choose(rng, (P.CHROME, P.BLACK, (0.70, 0.55, 0.25, 1.0)))
-    gap, xf = 0.003, D / 2
+    xf = D / 2
     b = ModelBuilder(object_id, "furniture_body")
     on_legs, base_h = _base(rng, b, D, W, wood, ranges)
     walls, inside = P.open_front_shell((-D / 2, -W / 2, base_h), (xf, W / 2, base_h + H), wall, wall * 0.6, wood)
     b.add_body(walls)
+    return _Carcass(b, W, H, wall, front_t, dwall, wood, front_colour, metal, xf, on_legs, base_h, inside)
 
+
+def build_door_cabinet(rng: np.random.Generator, object_id: str, ranges: StorageRanges = StorageRanges()) -> Blueprint:
+    carcass = _storage_carcass(rng, object_id, ranges, drawer_wall=False)
+    b, W, wall, door_t, wood, xf, base_h, inside = (carcass.b, carcass.W, carcass.wall, carcass.front_t, carcass.wood,
+                                                     carcass.xf, carcass.base_h, carcass.inside)
     shelf_t = wall
     shelf_bottoms = P.shelf_bottoms(rng, inside[0, 2], inside[1, 2], ranges.min_compartment, min_count=0, max_count=3)
     for z in shelf_bottoms:
@@ -99,32 +135,23 @@ def build_door_cabinet(rng: np.random.Generator, object_id: str, ranges: Storage
     lo, hi = min(compartments, key=lambda c: abs((c[0] + c[1]) / 2 - ranges.reach_height))
 
     two_doors = W >= ranges.two_doors_min_width and rng.random() < 0.5
-    z_range = (base_h, base_h + H)
+    z_range = (base_h, base_h + carcass.H)
     if two_doors:
         # The centre gap leaves room for the inner back corner's sideways sweep (see fridge).
         mid_gap = door_t**2 / (W / 2) + 0.004
         target_left = bool(rng.random() < 0.5)
-        door_specs = [("left", (-W / 2, -mid_gap / 2), target_left), ("right", (mid_gap / 2, W / 2), not target_left)]
+        door_specs: list[P.DoorSpec] = [("left", (-W / 2, -mid_gap / 2), z_range, target_left),
+                                        ("right", (mid_gap / 2, W / 2), z_range, not target_left)]
     else:
-        door_specs = [("left" if rng.random() < 0.5 else "right", (-W / 2, W / 2), True)]
+        door_specs = [("left" if rng.random() < 0.5 else "right", (-W / 2, W / 2), z_range, True)]
 
     open_angle = round(float(np.deg2rad(rng.uniform(*ranges.door_open_deg))), 4)
     handle_kind = choose(rng, P.HANDLE_KINDS)
-    handle_high = bool(rng.random() < 0.5)
-    target = None
-    for hinge, y_range, is_target in door_specs:
-        door = P.hinged_door(hinge, xf, y_range, z_range, door_t, gap, front_colour)
-        y0, y1 = y_range
-        free_y = y1 - 0.05 if hinge == "left" else y0 + 0.05
-        door_h = z_range[1] - z_range[0]
-        hz = z_range[0] + (0.8 if handle_high else 0.5) * door_h
-        handle = P.make_handle(handle_kind, door.outer_x, free_y, hz, "z", min(0.25, door_h * 0.4), metal,
-                               standoff=0.03, radius=0.007)
-        link, joint = b.add_moving([door.slab, *handle.parts], "revolute", door.origin, door.axis, open_angle,
-                                   uniform(rng, *ranges.door_mass), "hinge door")
-        if is_target:
-            target = (link, joint, hinge, handle)
-    link, joint, target_hinge, handle = target
+    handle_at = 0.8 if rng.random() < 0.5 else 0.5  # fraction of the door's height, the same on every door
+    masses = [uniform(rng, *ranges.door_mass) for _ in door_specs]  # drawn in door order
+    link, joint, target_hinge, handle = P.add_side_hinged_doors_with_handles(
+        b, door_specs, masses, xf, door_t, FRONT_GAP, carcass.front_colour, open_angle, handle_kind, carcass.metal,
+        handle_height=(handle_at, handle_at), handle_length=(0.4, 0.25), standoff=0.03, radius=0.007)
 
     y_lo, y_hi = inside[0, 1], inside[1, 1]
     if two_doors:  # only the half behind the opened door is reachable
@@ -137,7 +164,7 @@ def build_door_cabinet(rng: np.random.Generator, object_id: str, ranges: Storage
         "shelves": len(shelf_bottoms),
         "handle_type": handle.kind,
         "handle_grasp_point": list(handle.grasp_point),
-        "on_legs": on_legs,
+        "on_legs": carcass.on_legs,
         "wall_thickness": wall,
         "door_thickness": door_t,
     }
@@ -145,19 +172,9 @@ def build_door_cabinet(rng: np.random.Generator, object_id: str, ranges: Storage
 
 
 def build_drawer_chest(rng: np.random.Generator, object_id: str, ranges: StorageRanges = StorageRanges()) -> Blueprint:
-    W, D, H = uniform(rng, *ranges.width), uniform(rng, *ranges.depth), uniform(rng, *ranges.height)
-    wall = uniform(rng, *ranges.wall)
-    front_t = uniform(rng, *ranges.front_thickness)
-    dwall = uniform(rng, *ranges.drawer_wall)
-    wood = choose(rng, P.WOODS + (P.WHITE, P.DARK_GREY))
-    front_colour = wood if rng.random() < 0.6 else choose(rng, P.WOODS + (P.WHITE,))
-    metal = choose(rng, (P.CHROME, P.BLACK, (0.70, 0.55, 0.25, 1.0)))
-    gap, xf = 0.003, D / 2
-    b = ModelBuilder(object_id, "furniture_body")
-
-    on_legs, base_h = _base(rng, b, D, W, wood, ranges)
-    walls, inside = P.open_front_shell((-D / 2, -W / 2, base_h), (xf, W / 2, base_h + H), wall, wall * 0.6, wood)
-    b.add_body(walls)
+    carcass = _storage_carcass(rng, object_id, ranges, drawer_wall=True)
+    b, W, wall, front_t, dwall, wood, xf, inside = (carcass.b, carcass.W, carcass.wall, carcass.front_t,
+                                                    carcass.drawer_wall, carcass.wood, carcass.xf, carcass.inside)
 
     inner_h = inside[1, 2] - inside[0, 2]
     rows_max = int((inner_h + wall) // (ranges.min_opening + wall))
@@ -194,8 +211,8 @@ def build_drawer_chest(rng: np.random.Generator, object_id: str, ranges: Storage
             fz1 = oz1 + (wall - 0.002 if r == rows - 1 else half)
             fy0 = oy0 - (wall - 0.002 if c == 0 else half)
             fy1 = oy1 + (wall - 0.002 if c == columns - 1 else half)
-            x_in = xf + gap  # back face of the front panel
-            front = P.box_from_bounds((x_in, fy0, fz0), (x_in + front_t, fy1, fz1), front_colour)
+            x_in = xf + FRONT_GAP  # back face of the front panel
+            front = P.box_from_bounds((x_in, fy0, fz0), (x_in + front_t, fy1, fz1), carcass.front_colour)
             # The box sits inside the opening with running clearance on every side.
             bx0, bx1 = x_in - box_depth, x_in
             by0, by1 = oy0 + 0.006, oy1 - 0.006
@@ -208,8 +225,8 @@ def build_drawer_chest(rng: np.random.Generator, object_id: str, ranges: Storage
             ]
             face_x = x_in + front_t
             hz = (fz0 + fz1) / 2 if rng.random() < 0.5 else fz1 - min(0.06, (fz1 - fz0) / 4)
-            handle = P.make_handle(handle_kind, face_x, (fy0 + fy1) / 2, hz, "y", min(0.3, (fy1 - fy0) * 0.5), metal,
-                                   standoff=0.03, radius=0.007)
+            handle = P.make_handle(handle_kind, face_x, (fy0 + fy1) / 2, hz, "y", min(0.3, (fy1 - fy0) * 0.5),
+                                   carcass.metal, standoff=0.03, radius=0.007)
             origin = (face_x, (fy0 + fy1) / 2, (fz0 + fz1) / 2)
             link, joint = b.add_moving([front, *box, *handle.parts], "prismatic", origin, (1.0, 0.0, 0.0), open_q,
                                        uniform(rng, *ranges.drawer_mass), "slider drawer")
@@ -227,7 +244,7 @@ def build_drawer_chest(rng: np.random.Generator, object_id: str, ranges: Storage
         "target_drawer": target_index,
         "handle_type": handle.kind,
         "handle_grasp_point": list(handle.grasp_point),
-        "on_legs": on_legs,
+        "on_legs": carcass.on_legs,
         "open_fraction": open_fraction,
         "style": "drawer_chest",
         "in_region_state": "open",
