@@ -64,3 +64,24 @@ def test_without_run_missing_nothing_runs_and_short_runs_are_shown_as_they_are(t
     monkeypatch.setattr(sweep, "run_sweep", lambda *a, **k: (_ for _ in ()).throw(AssertionError("ran")))
     text = make_paper_table(cfg).read_text()
     assert "(n=4)" in text and text.count("not run") == len(TASKS) - 1
+
+
+def test_the_command_reads_runs_from_results_wherever_the_table_is_written(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from wpbench.cli import app
+
+    data, results, out = tmp_path / "data", tmp_path / "results", tmp_path / "elsewhere" / "table.md"
+    (data / "train").mkdir(parents=True)
+    (data / "val").mkdir()
+    monkeypatch.setattr(paper_table, "pose_errors", fake_errors)
+    monkeypatch.setattr(paper_table, "category_errors", lambda c, p: {})
+    cfg = PaperTableConfig(results=results)
+    for task in TASKS:
+        write_summary(run_dir(cfg, "gf", task), episodes=10)
+    result = CliRunner().invoke(app, ["paper-table", "--data", str(data), "--results", str(results), "--out", str(out),
+                                      "--episodes", "10", "--no-run-missing"])
+    assert result.exit_code == 0, result.output
+    gf_row = next(line for line in out.read_text().split("Simulated success rate")[1].splitlines()
+                  if line.startswith("| gf | ideal |"))
+    assert gf_row.count("50% [10, 90] (n=10)") == len(TASKS)

@@ -17,7 +17,9 @@ def paper_table(
                                                   "[default: as the learned policies answer]."),
     mirror_views: bool = typer.Option(None, help="Answer every second subset in the mirrored scene "
                                                  "[default: as the learned policies answer]."),
-    out: Path = typer.Option(Path("results/paper-table.md"), help="Markdown file to write."),
+    results: Path = typer.Option(Path("results"), help="Results folder: the runs are read from RESULTS/runs, and "
+                                                        "missing ones are written there."),
+    out: Path = typer.Option(None, help="Markdown file to write [default: RESULTS/paper-table.md]."),
     workers: int = typer.Option(None, min=1, help="Worker processes for the missing runs, all run as one sweep "
                                                   "[default: the number of cores]."),
     ray: str = typer.Option(None, "--ray", metavar="ADDRESS", help="Run the missing runs on a Ray cluster instead: "
@@ -42,7 +44,7 @@ def paper_table(
     from wpbench.evaluation.local_workers import available_cores
 
     cfg = PaperTableConfig(data=data, samples_per_kind=samples, episodes=episodes, obs=obs, run_missing=run_missing,
-                           results=out.parent, workers=workers if ray is not None else (workers or available_cores()),
+                           results=results, workers=workers if ray is not None else (workers or available_cores()),
                            use_ray=ray is not None, ray_address=ray_address(ray), executors=executor_names,
                            **ensemble)
     path = make_paper_table(cfg, out)
