@@ -127,6 +127,57 @@ def suction_point(action_points: np.ndarray, cross_pose: np.ndarray) -> Grasp | 
     return Grasp(tcp, -outward, 0.0)
 
 
+CUP_FOOTPRINT = 0.05       # m: no observed door point within this of a cup grasp (across the approach) ...
+CUP_PROUD = 0.01           # m: ... stands further out than the face (a handle the closed fingers would strike)
+MIN_CLEAR_POINTS = 20      # door points at least, clear of protrusions, for a cup grasp to be chosen among them
+
+
+def proud_near(door_points: np.ndarray, grasp: Grasp, candidates: np.ndarray) -> np.ndarray:
+    """(M,) bool: for each of ``candidates`` (M, 3), whether a point of ``door_points`` (N, 3)
+    within CUP_FOOTPRINT of it across ``grasp``'s approach stands more than CUP_PROUD out of
+    the face the grasp's TCP is on, or the candidate itself stands that far out."""
+    door = _check_cloud(door_points, "door_points")
+    c = np.asarray(candidates, dtype=np.float64)
+    if c.ndim != 2 or c.shape[1] != 3:
+        raise ValueError(f"candidates must be an (M, 3) array, got shape {c.shape}")
+    out = -np.asarray(grasp.approach, dtype=np.float64)
+    face = float(grasp.tcp[:3, 3] @ out)
+    proud = door[door @ out > face + CUP_PROUD]
+    if len(proud) == 0:
+        return np.zeros(len(c), dtype=bool)
+    d = c[:, None, :] - proud[None, :, :]
+    d = d - (d @ out)[..., None] * out
+    return (np.linalg.norm(d, axis=-1).min(1) < CUP_FOOTPRINT) | (c @ out > face + CUP_PROUD)
+
+
+def clear_suction_point(action_points: np.ndarray, cross_pose: np.ndarray,
+                        door_points: np.ndarray | None = None) -> tuple[Grasp | None, bool]:
+    """:func:`suction_point` on ``action_points`` (N, 3) under ``cross_pose`` (4, 4), kept
+    clear of protrusions of the observed door ``door_points`` (K, 3; default the action
+    points themselves): when one (a handle) stands within CUP_FOOTPRINT of that choice, the
+    choice is made again among the action points with no protrusion within the footprint
+    (when at least MIN_CLEAR_POINTS are left). The hand's closed fingers, as wide as the
+    cup, would otherwise strike the handle on the way in and shove the door before the cup
+    touches its face.
+
+    Returns (grasp, moved): the grasp (None when the prediction moves nothing) and whether
+    it was chosen again away from a protrusion.
+    """
+    a = _check_cloud(action_points, "action_points")
+    door = a if door_points is None else _check_cloud(door_points, "door_points")
+    T = np.asarray(cross_pose, dtype=np.float64)
+    if T.shape != (4, 4):
+        raise ValueError(f"cross_pose must be a (4, 4) transform, got shape {T.shape}")
+    grasp = suction_point(a, T)
+    if grasp is None or not proud_near(door, grasp, grasp.tcp[None, :3, 3])[0]:
+        return grasp, False
+    clear = a[~proud_near(door, grasp, a)]
+    if len(clear) < MIN_CLEAR_POINTS:
+        return grasp, False
+    moved = suction_point(clear, T)
+    return (grasp, False) if moved is None else (moved, True)
+
+
 def top_suction_point(object_points: np.ndarray) -> Grasp:
     """A suction grasp on the middle of the object's top."""
     p = _check_cloud(object_points, "object_points")

@@ -34,7 +34,8 @@ from scipy.spatial.transform import Rotation, Slerp
 from wpbench.sim.executor import ExecutionResult, blown_up, simulate_until_still
 from wpbench.sim.failure import (BLOW_UP, COLLISION, GRASP_MISSED, PLANNING_FAILED, SLIPPED, STALLED_AGAINST_HINGE,
                                  UNREACHABLE)
-from wpbench.sim.grasp_choice import Grasp, articulated_grasp, carry_height, suction_point, top_grasp, top_suction_point
+from wpbench.sim.grasp_choice import (Grasp, articulated_grasp, carry_height, clear_suction_point, suction_point, top_grasp,
+                                      top_suction_point)
 from wpbench.sim.gripper import FINGER_OPEN, FloatingGripper
 from wpbench.sim.place_goal import rest_on_support, upright_equivalent
 from wpbench.sim.screw_path import interpolate, path_length
@@ -276,12 +277,19 @@ def execute_articulated_gripper(scene: Scene, action_points: np.ndarray, cross_p
                                 free_joint: Callable[[], None], hold_joint: Callable[[], None]) -> ExecutionResult:
     """Grasp the door or drawer, move it along the predicted screw, release, settle."""
     run = _Runner(scene, STALLED_AGAINST_HINGE, slip_check=True)
-    choose = suction_point if scene.grasp_mode == "suction" else articulated_grasp
-    grasp = choose(action_points, cross_pose)
+    clear = False
+    if scene.grasp_mode == "suction":
+        # The cup clear of a handle (the closed fingers would strike it); when that moves
+        # the grasp to where the path goes under the floor, the plain face choice.
+        grasp, clear = clear_suction_point(action_points, cross_pose)
+        if clear and _below_floor(interpolate(cross_pose, np.linspace(0, 1, 11)) @ grasp.tcp):
+            grasp, clear = suction_point(action_points, cross_pose), False
+    else:
+        grasp = articulated_grasp(action_points, cross_pose)
     if grasp is None:   # the prediction moves nothing: the hand has nothing to do
         return _finish(run, _settle(scene), {"grasp_point": None})
     extra = {"grasp_point": grasp.tcp[:3, 3].round(4).tolist(), "grasp_approach": grasp.approach.round(4).tolist(),
-             "grasp_width": grasp.width}
+             "grasp_width": grasp.width, "grasp_clear_of_handle": clear}
     path = interpolate(cross_pose, np.linspace(0, 1, 11)) @ grasp.tcp
     extra["planned_path"] = path[:, :3, 3].round(4).tolist()
     if _below_floor(path):

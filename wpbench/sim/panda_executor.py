@@ -41,7 +41,9 @@ from wpbench.sim.door_push import handover_fraction, push_grip
 from wpbench.sim.executor import ExecutionResult, blown_up, simulate_until_still
 from wpbench.sim.failure import (BLOW_UP, COLLISION, GRASP_MISSED, PLANNING_FAILED, SLIPPED, STALLED_AGAINST_HINGE,
                                  UNREACHABLE)
-from wpbench.sim.grasp_choice import Grasp, articulated_grasp, carry_height, suction_point, top_grasp, top_suction_point
+from wpbench.sim.grasp_choice import (Grasp, articulated_grasp, carry_height, clear_suction_point, suction_point, top_grasp,
+                                      top_suction_point)
+from wpbench.sim.grasp_choice import CUP_FOOTPRINT  # noqa: F401  (tests/test_panda_executor.py imports it from here)
 from wpbench.sim.gripper import FINGER_OPEN
 from wpbench.sim.gripper_executor import (BLOCKED_OPENING, CARRY_CLEARANCE, CLOSE_SECONDS, CUP_REACH, GUARD_SPEED, GUARD_START, HELD_OPENING, HOLD_SECONDS,
                                           LIFT_HEIGHT, PREGRASP_DISTANCE, REGRASP_LIFT, RELEASE_SECONDS,
@@ -74,8 +76,6 @@ MIN_GRASP_HEIGHT = 0.5       # ... and then no lower than this ...
 MIN_LOW_POINTS = 20          # ... when it shows at least this many points in between
 FLOOR_GRASP_HEIGHT = 0.12    # m, a door point lower than this is grasped only when the door shows no such band above it
 HINGE_REACHES = (0.45, 0.3)  # m, a door no placement reaches along its whole arc is grasped this near its hinge (in turn)
-CUP_FOOTPRINT = 0.05        # m, no observed door point within this of a cup grasp (across the approach) ...
-CUP_PROUD = 0.01            # m ... stands further out than the face (a handle the fingers would strike)
 PUSH_RETREAT = 0.12          # m, the hand backs off this far from a door it pulled before it pushes
 PULL_HOLD = 0.3             # s, the hand holds a pulled door still this long before it lets go of it
 PUSH_DOOR_LAG = 0.08         # rad, the move to a push keeps clear of the door up to this far behind its plan
@@ -798,35 +798,15 @@ def _door_attempt(scene: ArmScene, choose: Callable, action_points: np.ndarray, 
     return plan, failed, extra
 
 
-def _proud_near(points: np.ndarray, grasp: Grasp, candidates: np.ndarray) -> np.ndarray:
-    """(M,) for each of ``candidates`` (M, 3): whether an observed door point of ``points`` within
-    CUP_FOOTPRINT of it across ``grasp``'s approach stands more than CUP_PROUD out of the face
-    the grasp is on (or it stands out itself)."""
-    out = -grasp.approach
-    face = float(grasp.tcp[:3, 3] @ out)
-    proud = points[points @ out > face + CUP_PROUD]
-    if len(proud) == 0:
-        return np.zeros(len(candidates), dtype=bool)
-    d = candidates[:, None, :] - proud[None, :, :]
-    d = d - (d @ out)[..., None] * out
-    return (np.linalg.norm(d, axis=-1).min(1) < CUP_FOOTPRINT) | (candidates @ out > face + CUP_PROUD)
-
-
 def _clear_suction(action_points: np.ndarray) -> Callable[[np.ndarray, np.ndarray], Grasp | None]:
-    """``suction_point``, chosen again among the given door points whose surroundings are clear
-    when a protrusion of the observed door (a handle) stands within the hand's footprint of the
-    first choice: the closed fingers, as wide as the cup, would strike it on the way in and
-    shove the door before the cup touches its face."""
+    """A choice for ``_door_attempt``: wpbench.sim.grasp_choice.clear_suction_point among the
+    given door points, with protrusions looked for on the whole observed door
+    ``action_points``; ``choose.moved`` records, per call, whether the choice moved off a handle."""
     def choose(points: np.ndarray, cross_pose: np.ndarray) -> Grasp | None:
-        grasp = suction_point(points, cross_pose)
-        moved = None
-        if grasp is not None and _proud_near(action_points, grasp, grasp.tcp[None, :3, 3])[0]:
-            clear = points[~_proud_near(action_points, grasp, points)]
-            if len(clear) >= MIN_LOW_POINTS:
-                moved = suction_point(clear, cross_pose)
-        choose.moved.append(moved is not None)
-        return moved or grasp
-    choose.moved = []   # whether each choice was moved off its first pick
+        grasp, moved = clear_suction_point(points, cross_pose, action_points)
+        choose.moved.append(moved)
+        return grasp
+    choose.moved = []
     return choose
 
 
