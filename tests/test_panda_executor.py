@@ -387,8 +387,8 @@ def test_strip_bases_stand_in_front_of_an_opening_beside_a_door_open_at_a_right_
 
 
 def test_a_cup_grasp_keeps_clear_of_a_handle():
-    from wpbench.sim.grasp_choice import suction_point
-    from wpbench.sim.panda_executor import CUP_FOOTPRINT, _clear_suction
+    from wpbench.sim.grasp_choice import CUP_FOOTPRINT, suction_point
+    from wpbench.sim.panda_executor import _clear_suction
 
     rng = np.random.default_rng(3)
     # An oven door's outer face (x = 0, facing +x) hinged at its bottom (z = 0.1), a handle bar

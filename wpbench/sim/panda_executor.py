@@ -43,7 +43,6 @@ from wpbench.sim.failure import (BLOW_UP, COLLISION, GRASP_MISSED, PLANNING_FAIL
                                  UNREACHABLE)
 from wpbench.sim.grasp_choice import (Grasp, articulated_grasp, carry_height, clear_suction_point, suction_point, top_grasp,
                                       top_suction_point)
-from wpbench.sim.grasp_choice import CUP_FOOTPRINT  # noqa: F401  (tests/test_panda_executor.py imports it from here)
 from wpbench.sim.gripper import FINGER_OPEN
 from wpbench.sim.gripper_executor import (BLOCKED_OPENING, CARRY_CLEARANCE, CLOSE_SECONDS, CUP_REACH, GUARD_SPEED, GUARD_START, HELD_OPENING, HOLD_SECONDS,
                                           LIFT_HEIGHT, PREGRASP_DISTANCE, REGRASP_LIFT, RELEASE_SECONDS,
