@@ -196,3 +196,36 @@ def test_a_knob_its_neighbour_pushes_at_rest_loses_its_collision(pushed_knob, tm
     assert fixed.extra["collision_dropped"] == [f"{KNOB_LINK}#0"]
     assert _peak_speed_at_rest(fixed) == 0.0
     assert fixed.open_qpos == pytest.approx(fixed.extra["open_qpos_limit"])
+
+
+def test_probe_scenes_use_sapiens_defaults_whatever_an_env_has_set(tmp_path):
+    """ManiSkill sets PhysX's process-wide defaults when it builds a scene; the load-time probe
+    scenes must not inherit them (or one object gets two open limits, by process history)."""
+    import sapien.physx as px
+
+    asset = generate_object("microwave", 2, tmp_path / "objects")
+    urdf = tmp_path / "objects" / asset.object_id / "mobility.urdf"
+
+    def shapes_and_bodies():
+        scene, articulation = load_collision_articulation(urdf, 1.0)
+        shapes = [s for link in articulation.get_links() for s in link.get_collision_shapes()]
+        assert shapes
+        return ({(round(s.contact_offset, 6), round(s.physical_material.static_friction, 6),
+                  round(s.physical_material.restitution, 6)) for s in shapes},
+                articulation.solver_position_iterations)
+
+    before = shapes_and_bodies()
+    px.set_shape_config(contact_offset=0.02, rest_offset=0.0)
+    px.set_body_config(solver_position_iterations=15, solver_velocity_iterations=1, sleep_threshold=0.005)
+    px.set_default_material(1.0, 0.8, 0.0)
+    try:
+        assert shapes_and_bodies() == before
+        assert before == ({(0.01, 0.3, 0.1)}, 10)
+        # The process's own defaults are left as they were set.
+        assert px.get_shape_config().contact_offset == pytest.approx(0.02)
+        assert px.get_body_config().solver_position_iterations == 15
+        assert px.get_default_material().static_friction == pytest.approx(1.0)
+    finally:
+        px.set_shape_config(px.PhysxShapeConfig())
+        px.set_body_config(px.PhysxBodyConfig())
+        px.set_default_material(0.3, 0.3, 0.1)

@@ -250,22 +250,28 @@ def _read_movables(folder: Path, semantics: list[tuple[str, str, str]]) -> list[
 
 
 def load_collision_articulation(urdf: Path, scale: float):
-    """Load ``urdf`` into a physics-only SAPIEN scene (visuals dropped: no renderer needed).
+    """Load ``urdf`` into a physics-only SAPIEN scene (visuals dropped: no renderer needed),
+    built with SAPIEN's own PhysX defaults whatever an env in this process has set
+    (``wpbench.assets.physx_defaults``), so the load-time checks give the same answer in
+    any process.
 
     Returns (scene, articulation); keep the scene alive while using the articulation.
     """
     import sapien
 
-    scene = sapien.Scene([sapien.physx.PhysxCpuSystem()])
-    loader = scene.create_urdf_loader()
-    loader.scale = scale
-    loader.fix_root_link = True
-    articulation_builders, _actors, _cameras = loader.parse(str(urdf))
-    if len(articulation_builders) != 1:
-        raise PartNetLoadError(f"{urdf} holds {len(articulation_builders)} articulations, expected one.")
-    for link_builder in articulation_builders[0].link_builders:
-        link_builder.visual_records = []  # visual meshes need a render system we do not create
-    articulation = articulation_builders[0].build(fix_root_link=True)
+    from wpbench.assets.physx_defaults import sapien_physx_defaults
+
+    with sapien_physx_defaults():
+        scene = sapien.Scene([sapien.physx.PhysxCpuSystem()])
+        loader = scene.create_urdf_loader()
+        loader.scale = scale
+        loader.fix_root_link = True
+        articulation_builders, _actors, _cameras = loader.parse(str(urdf))
+        if len(articulation_builders) != 1:
+            raise PartNetLoadError(f"{urdf} holds {len(articulation_builders)} articulations, expected one.")
+        for link_builder in articulation_builders[0].link_builders:
+            link_builder.visual_records = []  # visual meshes need a render system we do not create
+        articulation = articulation_builders[0].build(fix_root_link=True)
     articulation.set_root_pose(sapien.Pose())
     return scene, articulation
 
