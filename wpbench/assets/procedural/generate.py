@@ -24,7 +24,7 @@ from wpbench.assets.procedural.writer import write_model
 from wpbench.assets.spec import FurnitureAsset, OrientedBox
 
 # Bump when a change to any builder changes the files it writes (cache keys use it).
-GENERATOR_VERSION = 3
+GENERATOR_VERSION = 4
 
 BUILDERS: dict[str, Callable[[np.random.Generator, str], Blueprint]] = {
     "oven": oven.build,

@@ -13,11 +13,11 @@ the top of its side walls.
 Door cabinet: an open-front carcass with shelves behind one or two overlay doors hinged
 at the outer edges (both hinge sides occur). A cabinet door's stop is hidden in its hinge,
 so no point cloud shows it; the stop is drawn from ``door_open_deg``, a range narrow
-enough (upper / lower <= 1.25) that one predicted angle, 0.9 x the upper stop or more,
-lies within the 10% success tolerance of every stop in it (a door driven past its stop
-is held there), and wide enough to cover the common real stops (90-105 deg, reached by
-clamping) and some wider ones. The range's middle is at that tolerance's edge for the
-highest stops, so a policy that predicts the middle misses some of them. In-region: the compartment behind the
+enough (upper / lower <= 1.1) that the range's middle lies inside the 10% success
+tolerance of every stop in it, with margin (a door driven past its stop is held there).
+A policy that cannot see the stop regresses to that middle, so the middle is what
+must pass. Common real stops (90-105 deg) are below the range and are reached by
+clamping. In-region: the compartment behind the
 target door (the half behind it for two doors) whose middle is nearest reach height.
 """
 
@@ -46,7 +46,7 @@ class StorageRanges:
     drawer_mass: tuple[float, float] = (1.5, 4.0)
     min_opening: float = 0.25  # drawer opening height: a 16 cm block + drawer floor + margin
     door_cabinet_share: float = 0.5
-    door_open_deg: tuple[float, float] = (105.0, 130.0)
+    door_open_deg: tuple[float, float] = (119.0, 130.0)
     door_mass: tuple[float, float] = (1.5, 4.0)
     two_doors_min_width: float = 0.6
     min_compartment: float = 0.24  # height between shelves, so a 16 cm block fits with margin
