@@ -228,3 +228,27 @@ def test_refresh_recomputes_an_old_summary_from_its_episodes(tmp_path, wpbench_e
     assert new["meta"]["obs"] == "mesh" and new["timings"]["run"]["peak_rss_mib"] == 512.0
     assert new["created_utc"] == old["created_utc"]
     assert "slipped" in (tmp_path / "results" / "leaderboard.md").read_text()
+
+
+def _record_furniture(run_dir, assets, generator):
+    import json
+
+    (run_dir / "run.json").write_text(json.dumps({"assets": assets, "furniture_generator": generator}))
+
+
+def test_runs_on_another_furniture_version_are_left_out_with_the_reason(populated_results):
+    from wpbench.assets.procedural import GENERATOR_VERSION
+
+    old = add_run(populated_results, "open/old-wp", "wp", "open", 0, 10).parent
+    _record_furniture(old, "procedural", GENERATOR_VERSION - 1)
+    current = add_run(populated_results, "open/new-wp", "wp", "open", 10, 10).parent
+    _record_furniture(current, "procedural", GENERATOR_VERSION)
+    real = add_run(populated_results, "open/real-wp", "wp", "open", 5, 10, assets="/data/partnet").parent
+    _record_furniture(real, "/data/partnet", None)
+    with pytest.warns(UserWarning, match=f"generator version {GENERATOR_VERSION - 1}.*results/archive/"):
+        frame, skipped = collect_summaries(populated_results)
+    assert skipped == [old / "summary.json"]
+    assert set(frame.run) >= {"open/new-wp", "open/real-wp"} and "open/old-wp" not in set(frame.run)
+    text = leaderboard_markdown(frame, skipped)
+    assert "another generator version left out" in text and "open/old-wp" in text
+    assert "Unreadable" not in text

@@ -101,3 +101,29 @@ def test_runs_are_read_from_each_executors_folder(tmp_path: Path):
     assert success(cfg, "wp", "open-door") is None
     assert run_dir(cfg, "wp", "place-in", "partnet-mobility", executor="panda").name == \
         "wp__place-in__val__partnet-mobility__camera__panda"
+
+
+def test_the_cli_refuses_a_run_on_another_furniture_version_before_any_work(tmp_path: Path, wpbench_exe):
+    import json
+    import subprocess
+
+    from wpbench.assets.procedural import GENERATOR_VERSION
+    from wpbench.evaluation.paper_table import run_dir
+
+    data = tmp_path / "data"
+    (data / "train").mkdir(parents=True)
+    (data / "val").mkdir()
+    results = tmp_path / "results"
+    old = run_dir(PaperTableConfig(results=results), "wp-postsvd-t", "place-in", split="test")
+    old.mkdir(parents=True)
+    (old / "run.json").write_text(json.dumps({"assets": "procedural", "furniture_generator": GENERATOR_VERSION - 1}))
+    (old / "summary.json").write_text(json.dumps({"success_rate": 0.5}))
+    out = tmp_path / "table.md"
+    done = subprocess.run([str(wpbench_exe), "paper-table", "--data", str(data), "--results", str(results),
+                           "--no-run-missing", "--out", str(out)],
+                          capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
+    assert done.returncode == 2
+    (line,) = done.stderr.strip().splitlines()
+    assert line.startswith("Error: ") and old.name in line and f"version {GENERATOR_VERSION - 1}" in line
+    assert "results/archive/" in line and "Traceback" not in done.stderr
+    assert not out.exists()

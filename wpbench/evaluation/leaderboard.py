@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from wpbench.evaluation.furniture_version import other_furniture_reason
 from wpbench.evaluation.summary import SUMMARY_FILE, load_summary
 
 __all__ = [
@@ -171,6 +172,11 @@ def collect_summaries(
     root = Path(results_dir)
     rows, skipped = [], []
     for path in find_summaries(root):
+        reason = other_furniture_reason(path.parent)
+        if reason:
+            warnings.warn(f"leaving out {reason}", stacklevel=2)
+            skipped.append(path)
+            continue
         try:
             summary = load_summary(path)
             rows.append(_row(summary, run=str(path.parent.relative_to(root)) or "."))
@@ -262,8 +268,13 @@ def leaderboard_markdown(frame: "Any", skipped: list[Path] | tuple[Path, ...] = 
         tabulate(rows, headers=headers, tablefmt="github", disable_numparse=True),
         "",
     ]
-    if skipped:
-        lines += ["Unreadable summaries left out: " + ", ".join(f"`{p}`" for p in skipped), ""]
+    other_furniture = [p for p in skipped if other_furniture_reason(p.parent)]
+    unreadable = [p for p in skipped if p not in other_furniture]
+    if other_furniture:
+        lines += ["Runs on built-in furniture of another generator version left out (move them under "
+                  f"`{ARCHIVE_DIR}/` or score them again): " + ", ".join(f"`{p}`" for p in other_furniture), ""]
+    if unreadable:
+        lines += ["Unreadable summaries left out: " + ", ".join(f"`{p}`" for p in unreadable), ""]
     return "\n".join(lines)
 
 

@@ -119,6 +119,11 @@ def run_dir(cfg: PaperTableConfig, policy: str, task: str, source: str = "proced
 def _read_summary(directory: Path) -> dict | None:
     import json
 
+    from wpbench.evaluation.furniture_version import OtherFurnitureError, other_furniture_reason
+
+    reason = other_furniture_reason(directory)
+    if reason:
+        raise OtherFurnitureError(reason)
     summary_file = directory / "summary.json"
     return json.loads(summary_file.read_text()) if summary_file.is_file() else None
 
@@ -252,7 +257,18 @@ def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: di
     return "\n".join(lines) + "\n"
 
 
+def _refuse_runs_on_other_furniture(cfg: PaperTableConfig) -> None:
+    """Raise OtherFurnitureError for the first run the table would read that was scored on
+    built-in furniture of another generator version, before the slow pose errors are computed."""
+    for policy in cfg.policies:
+        for executor in EXECUTORS:
+            for task in TASKS:
+                for read in (success, test_success):
+                    read(cfg, policy, task, executor)
+
+
 def make_paper_table(cfg: PaperTableConfig, out: Path | None = None) -> Path:
+    _refuse_runs_on_other_furniture(cfg)
     errors, successes, by_category, real_successes, test_successes = {}, {}, {}, {}, {}
     for policy in cfg.policies:
         try:
