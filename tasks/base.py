@@ -132,7 +132,7 @@ class CrossPoseEnv(BaseEnv):
             raise ValueError(f"unknown grasp {grasp!r}; valid: {', '.join(GRASPS)}")
         self.executor = executor
         self.grasp = grasp
-        from wpbench.assets.library import load_library
+        from wpbench.assets.library import furniture_pool_digest, load_library
         from wpbench.assets.ravens import get_ravens_object
 
         self.observation_source = obs_mode
@@ -141,6 +141,7 @@ class CrossPoseEnv(BaseEnv):
         self.assets = load_library(assets, split=split, extra_train=extra)
         if not self.assets:
             raise ValueError(f"no furniture found for assets={assets!r} split={split!r}")
+        self.furniture_pool = furniture_pool_digest(self.assets)
         self.ravens = [get_ravens_object(name) for name in objects]
         self.num_action_points = int(num_action_points)
         self.num_anchor_points = int(num_anchor_points)

@@ -18,7 +18,7 @@ import trimesh
 
 from test_assets_decompose import _add_link, decomposers  # noqa: F401  (decomposers: a fixture)
 from test_assets_partnet import DATASET, needs_dataset
-from wpbench.assets.clear_path import trim_overlaps
+from wpbench.assets.clear_path import trim_overlaps, write_cleared_urdf
 from wpbench.assets.convex_overlap import clip_convex, convex_volume, overlap_inradius, trim_away
 from wpbench.assets.partnet import (
     PartNetLoadConfig,
@@ -114,6 +114,51 @@ def blocked_microwave(tmp_path, decomposers):  # noqa: F811
     with open(folder / "semantics.txt", "a") as f:
         f.write(f"{BLOCKER_LINK} static hinge_cover\n")
     return folder, config, centre
+
+
+ONE_LINK_URDF = """<robot name="box">
+  <link name="body">
+    <collision><geometry><mesh filename="body.obj"/></geometry></collision>
+    <collision><geometry><mesh filename="body.obj"/></geometry></collision>
+  </link>
+</robot>
+"""
+
+
+def _clear_in_step(urdf: Path, barrier, results) -> None:
+    """One of several processes clearing the same URDF at the same moment."""
+    pieces = {"body": [cube([0, 0, 0], [1, 1, 0.5]), None]}
+    barrier.wait()
+    try:
+        results.put(str(write_cleared_urdf(urdf, pieces, {"body#0", "body#1"}, {"body": (np.eye(4), 1.0)})))
+    except BaseException as err:  # noqa: BLE001 - the parent reports it
+        results.put(f"error: {type(err).__name__}: {err}")
+
+
+def test_workers_clearing_the_same_object_at_once_all_get_the_same_complete_urdf(tmp_path):
+    # A run's workers load (and so clear) the same object side by side on a fresh cache;
+    # one that fails would silently leave the object out of its episode draws.
+    import multiprocessing
+
+    context = multiprocessing.get_context("fork")
+    for attempt in range(4):
+        urdf = tmp_path / f"try{attempt}" / "derived.urdf"
+        urdf.parent.mkdir()
+        urdf.write_text(ONE_LINK_URDF)
+        barrier, results = context.Barrier(8), context.Queue()
+        workers = [context.Process(target=_clear_in_step, args=(urdf, barrier, results)) for _ in range(8)]
+        for w in workers:
+            w.start()
+        answers = {results.get(timeout=60) for _ in workers}
+        for w in workers:
+            w.join(60)
+        assert len(answers) == 1 and not next(iter(answers)).startswith("error"), answers
+        cleared = Path(next(iter(answers)))
+        collisions = ET.parse(cleared).getroot().findall("link/collision")
+        assert len(collisions) == 1  # the dropped piece is gone, the trimmed one points at its own file
+        piece = trimesh.load(collisions[0].find("geometry/mesh").get("filename"), force="mesh")
+        assert piece.bounds.tolist() == [[0, 0, 0], [1, 1, 0.5]]
+        assert [f.name for f in urdf.parent.rglob(".*")] == []  # no temporary file left behind
 
 
 @pytest.mark.slow

@@ -268,6 +268,16 @@ def test_load_library_filters_by_split_and_category(small_library):
         library.load_library(out / "missing")
 
 
+def test_the_furniture_pool_hash_changes_with_a_missing_object_or_another_order(small_library):
+    out, _ = small_library
+    pool = library.load_library(out, split="train")
+    digest = library.furniture_pool_digest(pool)
+    assert digest == library.furniture_pool_digest(library.load_library(out, split="train"))  # same folder, same hash
+    assert library.furniture_pool_digest(pool[:-1]) != digest  # one object skipped
+    assert library.furniture_pool_digest(pool[::-1]) != digest  # same objects, other draws
+    assert library.furniture_pool_digest(library.load_library(out, split="val")) != digest
+
+
 def test_procedural_library_is_generated_once_into_the_cache(tmp_path, monkeypatch):
     monkeypatch.setenv("WPBENCH_CACHE", str(tmp_path))
     folder = library.procedural_library(seed=2, per_category=2)

@@ -151,6 +151,31 @@ def test_resume_refuses_a_different_run(tmp_path, key, value):
         EpisodeWriter(tmp_path, {**CONFIG, key: value}, resume=True)
 
 
+def test_a_record_drawn_from_other_furniture_is_refused_and_the_earlier_ones_kept(tmp_path):
+    # A worker that skipped an object draws other furniture for the same seeds.
+    with EpisodeWriter(tmp_path, CONFIG) as writer:
+        writer.write(make_record(0, furniture_pool="aaaa"))
+        writer.write(make_record(1))  # a failure record made without an env names no pool
+        with pytest.raises(RunMismatchError, match=r"episode 2 .*other furniture \(pool bbbb\) than episode 0 "):
+            writer.write(make_record(2, furniture_pool="bbbb"))
+        writer.write(make_record(3, furniture_pool="aaaa"))
+    assert [r["episode"] for r in read_episodes(tmp_path)] == [0, 1, 3]
+
+
+def test_resume_refuses_a_file_that_mixes_furniture_pools(tmp_path):
+    lines = [make_record(0, furniture_pool="aaaa"), make_record(1, furniture_pool="bbbb")]
+    (tmp_path / RUN_CONFIG_FILE).write_text(json.dumps(CONFIG))
+    (tmp_path / EPISODES_FILE).write_text("".join(json.dumps(r) + "\n" for r in lines))
+    with pytest.raises(RunMismatchError, match="other furniture"):
+        EpisodeWriter(tmp_path, CONFIG, resume=True)
+    with EpisodeWriter(tmp_path / "same", CONFIG) as writer:  # one pool throughout is fine
+        writer.write(make_record(0, furniture_pool="aaaa"))
+    with EpisodeWriter(tmp_path / "same", CONFIG, resume=True) as writer:
+        writer.write(make_record(1, furniture_pool="aaaa"))
+        with pytest.raises(RunMismatchError, match="other furniture"):
+            writer.write(make_record(2, furniture_pool="cccc"))
+
+
 def test_resume_refuses_episodes_without_run_config(tmp_path):
     (tmp_path / EPISODES_FILE).write_text(json.dumps(make_record(0)) + "\n")
     with pytest.raises(RunMismatchError, match=RUN_CONFIG_FILE):

@@ -31,6 +31,8 @@ what changed. The dataset and the derived URDF are never modified.
 from __future__ import annotations
 
 import hashlib
+import os
+import tempfile
 import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -136,7 +138,10 @@ def write_cleared_urdf(urdf: Path, pieces: dict[str, list[np.ndarray | None]], c
 
     link_frames: {link: (4x4 body-from-piece transform, scale)} to bring body-frame
     vertices back into the piece files' frame. The file is named after its content, so
-    the same clearing of the same URDF gives the same path.
+    the same clearing of the same URDF gives the same path. Safe when several processes
+    (a run's workers) clear the same object at once: every file is written under a name of
+    its own and renamed into place, piece files before the URDF that names them, so a
+    reader never sees a half-written file and concurrent writers leave identical files.
     """
     tree = ET.parse(urdf)
     digest = hashlib.sha256(urdf.read_bytes())
@@ -161,13 +166,23 @@ def write_cleared_urdf(urdf: Path, pieces: dict[str, list[np.ndarray | None]], c
             T, scale = link_frames[name]
             local = (vertices - T[:3, 3]) @ T[:3, :3] / scale
             piece_file = folder / f"{name}-{i:03d}.obj"
-            trimesh.convex.convex_hull(local).export(piece_file)
+            _replace_atomically(piece_file, trimesh.convex.convex_hull(local).export(file_type="obj"))
             collisions[i].find("geometry/mesh").set("filename", str(piece_file.resolve()))
     ET.indent(tree)
-    tmp = out.with_name(f".{out.name}.tmp")
-    tree.write(tmp)
-    tmp.replace(out)
+    _replace_atomically(out, ET.tostring(tree.getroot(), encoding="unicode"))
     return out
+
+
+def _replace_atomically(path: Path, text: str) -> None:
+    """Write ``text`` to a temporary file of this process's own beside ``path``, then rename it over ``path``."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 def clear_target_path(

@@ -175,6 +175,23 @@ def load_library(
     return assets
 
 
+def furniture_pool_digest(assets: Iterable[FurnitureAsset]) -> str:
+    """A short hash of the furniture an env draws its episodes from, in draw order.
+
+    An episode's furniture is ``assets[draw(seed)]``, so two processes give a seed the same
+    furniture only if they loaded the same objects in the same order. Episode records carry
+    this hash and a run refuses to mix two of them (``wpbench.evaluation.records``): a
+    worker that could not load an object would otherwise draw other furniture for the
+    same seeds without a word.
+    """
+    import hashlib
+
+    digest = hashlib.sha256()
+    for asset in assets:
+        digest.update(f"{asset.source}\t{asset.category}\t{asset.object_id}\n".encode())
+    return digest.hexdigest()[:16]
+
+
 def run_split(source: str | Path, split: str | None) -> str | None:
     """The split a run on ``source`` loads: None for "all"; for a folder, ``split`` only when the
     folder has a split file of its objects (``wpbench assets split``), else None (every object)."""

@@ -19,7 +19,9 @@ Required keys of an episode record (others are allowed and kept):
 ``category``, ``success`` (bool), ``rot_err_deg``, ``trans_err_m``,
 ``point_err_m``, ``point_mse`` (floats; NaN allowed). Optional keys the summary
 understands: ``success_once``, ``success_at_end`` (bool), ``split``,
-``asset_source``, ``timings`` (dict name -> seconds).
+``asset_source``, ``timings`` (dict name -> seconds). ``furniture_pool``: the hash of
+the furniture the episode was drawn from (``wpbench.assets.library.furniture_pool_digest``);
+a run whose records name two different pools is refused, on writing and on resuming.
 
 JSON has no NaN: non-finite floats are written as ``null`` and read back as NaN
 for the numeric error fields.
@@ -261,6 +263,7 @@ class EpisodeWriter:
         self.run_config = _normalise_config(run_config or {})
         self._completed: set[int] = set()
         self.records: list[dict[str, Any]] = []
+        self._pool: tuple[str, int] | None = None  # (furniture_pool, first episode with it)
         self.dropped_bytes = 0
         self.written = 0
 
@@ -342,6 +345,22 @@ class EpisodeWriter:
                     f"{self.path}: record {line} (episode {episode}) belongs to another run: "
                     + ", ".join(foreign) + "; rerun into a new --out"
                 )
+            self._check_pool(record)
+
+    def _check_pool(self, record: Mapping[str, Any]) -> None:
+        """Refuse a record drawn from other furniture than the run's earlier records: the
+        same seed would then mean different objects within one run."""
+        pool = record.get("furniture_pool")
+        if pool is None:
+            return
+        if self._pool is None:
+            self._pool = (str(pool), int(record["episode"]))
+        elif str(pool) != self._pool[0]:
+            raise RunMismatchError(
+                f"{self.path}: episode {record['episode']} was drawn from other furniture (pool {pool}) than "
+                f"episode {self._pool[1]} (pool {self._pool[0]}): the processes of this run did not load the "
+                "same objects (a skipped object is named in the log's warnings); rerun into a new --out"
+            )
 
     @staticmethod
     def _write_json_atomically(path: Path, value: Any) -> None:
@@ -366,6 +385,7 @@ class EpisodeWriter:
         episode = int(record["episode"])
         if episode in self._completed:
             raise RecordFormatError(f"episode {episode} is already recorded in {self.path}")
+        self._check_pool(record)
         line = dumps_json(record, sort_keys=False)
         good_end = self._file.tell()
         try:

@@ -212,6 +212,7 @@ def run_episode(env, policy, seed: int, observer=None) -> dict[str, Any]:
         "object_id": base.asset.object_id,
         "category": base.asset.category,
         "asset_source": base.asset.source,
+        "furniture_pool": base.furniture_pool,
         "success": bool(info["success"][0]),
         "stages": stages,
         "timings": {"reset_s": t_reset, "policy_s": t_policy, "episode_s": time.perf_counter() - t0,
