@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from wpbench.evaluation.paper_table import KINDS, SPLITS, PaperTableConfig, make_paper_table, render
+from wpbench.evaluation.paper_table import KINDS, SPLITS, PaperTableConfig, make_paper_table, render, training_data
 
 
 def test_render_puts_each_number_in_its_cell():
@@ -32,6 +32,23 @@ def test_missing_weights_give_a_table_that_says_so(tmp_path: Path):
     cfg = PaperTableConfig(data=tmp_path, policies=("no-such-policy",), run_missing=False, results=tmp_path)
     out = make_paper_table(cfg)
     assert "no-such-policy | no weights" in out.read_text()
+
+
+def test_the_table_names_what_each_policy_was_trained_on():
+    # The train columns are the table's data set, not necessarily the one a policy trained on.
+    import json
+
+    from wpbench.weights import shipped_weights_root
+
+    cfg = PaperTableConfig(data=Path("data-g9"), policies=("gf", "oracle"))
+    recorded = json.loads((shipped_weights_root() / "gf" / "config.json").read_text())["data"]
+    gf = training_data(cfg, "gf")
+    assert gf == f"trained on {recorded['path']} (train hash {recorded['train_manifest_hash']})"
+    oracle = training_data(cfg, "oracle")
+    assert oracle.startswith(f"free-floating: tp trained on ") and f"articulated: gf {gf}" in oracle
+    text = render(cfg, {}, {}, trained_on={"gf": gf, "oracle": oracle})
+    assert "`data-g9`'s train split" in text and f"| gf | {gf} |" in text and f"| oracle | {oracle} |" in text
+    assert "its weights were" not in render(cfg, {}, {})
 
 
 def test_category_rows_show_each_category_of_each_kind():

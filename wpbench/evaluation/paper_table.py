@@ -93,6 +93,17 @@ def pose_errors(cfg: PaperTableConfig, policy: str) -> dict[tuple[str, str], dic
     return out
 
 
+def training_data(cfg: PaperTableConfig, policy: str) -> str:
+    """What ``policy``'s weights were trained on, from their config (the oracle: both specialists')."""
+    from wpbench.training.data_mix import describe_data
+
+    learned = _policies_for(policy, cfg)
+    if policy == "oracle":
+        return "; ".join(f"{kind}: {learned[kind].config.policy} {describe_data(learned[kind].model_config.get('data') or {})}"
+                         for kind in KINDS)
+    return describe_data(learned[KINDS[0]].model_config.get("data") or {})
+
+
 def category_errors(cfg: PaperTableConfig, policy: str) -> dict[str, dict[str, dict[str, float]]]:
     """{kind: {category: errors}} on every val sample: where a policy fails, not only how much."""
     from wpbench.data.dataset import CrossPoseDataset
@@ -204,10 +215,12 @@ def _success_table(cfg: PaperTableConfig, title: str, successes: dict) -> list[s
 
 
 def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: dict | None = None,
-           real_successes: dict | None = None, test_successes: dict | None = None) -> str:
+           real_successes: dict | None = None, test_successes: dict | None = None,
+           trained_on: dict | None = None) -> str:
     """``successes`` / ``real_successes`` / ``test_successes``: {(policy, executor, task): summary}
     on the built-in val furniture / the real objects / the built-in test furniture (those two
-    sections only when there is at least one such run)."""
+    sections only when there is at least one such run). ``trained_on``: {policy: what its
+    weights were trained on} (a section of its own when given)."""
     by_category = by_category or {}
     test_successes = test_successes or {}
     seen = [*successes.values(), *(real_successes or {}).values(), *test_successes.values()]
@@ -236,6 +249,10 @@ def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: di
                 e = errors[policy][(split, kind)]
                 cells.append(f"{_fmt(e['rot_deg'])} / {_fmt(e['trans_m'], 100)} / {_fmt(e['point_m'], 100)}")
         lines.append(f"| {policy} | " + " | ".join(cells) + " |")
+    if trained_on:
+        lines += ["", f"The train columns are `{cfg.data}`'s train split, which is a policy's own training data "
+                      "only where the two below agree:", "", "| policy | its weights were |", "|---|---|"]
+        lines += [f"| {policy} | {trained_on[policy]} |" for policy in cfg.policies if policy in trained_on]
     lines += ["", "## Val pose errors by furniture category (rotation deg / translation cm)", "",
               "Every val sample of the kind the policy is asked about; the rows show where a policy fails.", ""]
     categories = sorted({c for per_kind in by_category.values() for kinds in per_kind.values() for c in kinds})
@@ -269,11 +286,12 @@ def _refuse_runs_on_other_furniture(cfg: PaperTableConfig) -> None:
 
 def make_paper_table(cfg: PaperTableConfig, out: Path | None = None) -> Path:
     _refuse_runs_on_other_furniture(cfg)
-    errors, successes, by_category, real_successes, test_successes = {}, {}, {}, {}, {}
+    errors, successes, by_category, real_successes, test_successes, trained_on = {}, {}, {}, {}, {}, {}
     for policy in cfg.policies:
         try:
             errors[policy] = pose_errors(cfg, policy)
             by_category[policy] = category_errors(cfg, policy)
+            trained_on[policy] = training_data(cfg, policy)
         except (FileNotFoundError, ValueError) as err:
             print(f"{policy}: no pose errors ({err})")
     if cfg.run_missing:
@@ -288,5 +306,5 @@ def make_paper_table(cfg: PaperTableConfig, out: Path | None = None) -> Path:
                         found[(policy, executor, task)] = summary
     out = Path(out) if out is not None else Path(cfg.results) / "paper-table.md"
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(render(cfg, errors, successes, by_category, real_successes, test_successes))
+    out.write_text(render(cfg, errors, successes, by_category, real_successes, test_successes, trained_on))
     return out
