@@ -31,8 +31,6 @@ what changed. The dataset and the derived URDF are never modified.
 from __future__ import annotations
 
 import hashlib
-import os
-import tempfile
 import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -41,6 +39,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from wpbench.assets.collision import write_text_atomically
 from wpbench.assets.convex_overlap import overlap_inradius, trim_away
 from wpbench.assets.reach import OpeningProbe, probe_opening, restless_links
 
@@ -154,7 +153,6 @@ def write_cleared_urdf(urdf: Path, pieces: dict[str, list[np.ndarray | None]], c
     out = urdf.parent / f"{urdf.stem}-{CLEARED_URDF_TAG}-{tag}.urdf"
     if out.is_file():
         return out
-    folder.mkdir(parents=True, exist_ok=True)
     for link_el in tree.getroot().findall("link"):
         name = link_el.get("name", "")
         collisions = link_el.findall("collision")
@@ -166,23 +164,11 @@ def write_cleared_urdf(urdf: Path, pieces: dict[str, list[np.ndarray | None]], c
             T, scale = link_frames[name]
             local = (vertices - T[:3, 3]) @ T[:3, :3] / scale
             piece_file = folder / f"{name}-{i:03d}.obj"
-            _replace_atomically(piece_file, trimesh.convex.convex_hull(local).export(file_type="obj"))
+            write_text_atomically(piece_file, trimesh.convex.convex_hull(local).export(file_type="obj"))
             collisions[i].find("geometry/mesh").set("filename", str(piece_file.resolve()))
     ET.indent(tree)
-    _replace_atomically(out, ET.tostring(tree.getroot(), encoding="unicode"))
+    write_text_atomically(out, ET.tostring(tree.getroot(), encoding="unicode"))
     return out
-
-
-def _replace_atomically(path: Path, text: str) -> None:
-    """Write ``text`` to a temporary file of this process's own beside ``path``, then rename it over ``path``."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def clear_target_path(

@@ -194,13 +194,19 @@ def _fingerprint(*chunks: bytes) -> str:
     return h.hexdigest()[:12]
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` via a temporary file in the same directory and a rename."""
+def write_text_atomically(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` via a temporary file of this process's own in the same
+    directory and a rename, so a reader (another worker) never sees a half-written file and
+    processes writing the same file at once do not collide."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.replace(tmp, path)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 # --------------------------------------------------------------------------- visual meshes
@@ -231,8 +237,8 @@ def _visual_with_existing_textures(obj_path: Path, cache_dir: Path) -> Path:
     target = cache_dir / key / obj_path.name
     if not target.is_file():
         for name, text in cleaned.items():
-            _write_atomic(target.parent / name, text)
-        _write_atomic(target, obj_path.read_text(errors="replace"))
+            write_text_atomically(target.parent / name, text)
+        write_text_atomically(target, obj_path.read_text(errors="replace"))
     return target
 
 
@@ -394,7 +400,7 @@ def finish_collision(plan: CollisionPlan) -> DerivedCollision:
     text = ET.tostring(root, encoding="unicode")
     urdf_path = plan.cache_dir / f"{DERIVED_URDF_PREFIX}-{_fingerprint(*fingerprints)}.urdf"
     if not urdf_path.is_file() or urdf_path.read_text() != text:
-        _write_atomic(urdf_path, text)
+        write_text_atomically(urdf_path, text)
     return DerivedCollision(
         urdf=urdf_path,
         source="dataset-cvx" if plan.use_dataset_cvx else "coacd",

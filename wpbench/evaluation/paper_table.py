@@ -55,6 +55,14 @@ class PaperTableConfig:
     executors: tuple[str, ...] = ("ideal",)  # whose missing val runs ``run_missing`` runs; rows show every executor run
 
 
+def _oracle_specialists() -> dict[str, str]:
+    """{kind: policy} the oracle routes each kind to (its config's defaults)."""
+    from wpbench.policies.oracle import OracleConfig
+
+    oracle = OracleConfig()
+    return {FREE: oracle.free_policy, ARTICULATED: oracle.articulated_policy}
+
+
 def _policies_for(policy: str, cfg: PaperTableConfig) -> dict[str, object]:
     """{kind: the LearnedPolicy answering that kind for ``policy``} (the oracle routes each kind to
     its specialist). The pose errors use each one's model, point counts, seed, subsets and mirrored
@@ -65,7 +73,7 @@ def _policies_for(policy: str, cfg: PaperTableConfig) -> dict[str, object]:
         return LearnedPolicy(policy=name, subsets=cfg.subsets, mirror_views=cfg.mirror_views)
 
     if policy == "oracle":
-        return {"articulated": loaded("gf"), "free-floating": loaded("tp")}
+        return {kind: loaded(name) for kind, name in _oracle_specialists().items()}
     learned = loaded(policy)
     return {kind: learned for kind in KINDS}
 
@@ -94,14 +102,17 @@ def pose_errors(cfg: PaperTableConfig, policy: str) -> dict[tuple[str, str], dic
 
 
 def training_data(cfg: PaperTableConfig, policy: str) -> str:
-    """What ``policy``'s weights were trained on, from their config (the oracle: both specialists')."""
+    """What ``policy``'s weights were trained on, from their config.json (the oracle: both
+    specialists'); reads no model."""
     from wpbench.training.data_mix import describe_data
+    from wpbench.weights import read_config, shipped_weights_root
 
-    learned = _policies_for(policy, cfg)
+    def of(name: str) -> str:
+        return describe_data(read_config(shipped_weights_root() / name, name).get("data") or {})
+
     if policy == "oracle":
-        return "; ".join(f"{kind}: {learned[kind].config.policy} {describe_data(learned[kind].model_config.get('data') or {})}"
-                         for kind in KINDS)
-    return describe_data(learned[KINDS[0]].model_config.get("data") or {})
+        return "; ".join(f"{kind}: {name} {of(name)}" for kind, name in _oracle_specialists().items())
+    return of(policy)
 
 
 def category_errors(cfg: PaperTableConfig, policy: str) -> dict[str, dict[str, dict[str, float]]]:
