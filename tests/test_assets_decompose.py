@@ -250,3 +250,21 @@ def test_an_interrupted_prepare_leaves_only_finished_entries(oven, decomposers, 
     assert len(entries) == 1 and (entries[0] / "timing.json").is_file()  # the finished link only
     assert not list((cache / oven.name).glob("*.urdf"))
     assert not [p for p in (cache / oven.name).rglob("*") if p.name.startswith(".")]  # no temporary files
+
+
+def test_a_generated_library_given_as_assets_is_not_decomposed(wpbench_exe, tmp_path, monkeypatch):
+    """`wpbench assets generate` folders carry their own collision boxes: a run or data generation
+    on worker processes reads them as they are, and nothing lands in the decomposition cache."""
+    from wpbench.assets.library import load_library
+    from wpbench.assets.prepare import prepare_asset_sources
+
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("WPBENCH_CACHE", str(cache))
+    library = tmp_path / "library"
+    result = subprocess.run([str(wpbench_exe), "assets", "generate", "--out", str(library),
+                             "--per-category", "2", "--val-per-category", "1", "--category", "microwave"],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    prepare_asset_sources([str(library), "procedural"])
+    assert not (cache / "partnet").exists()
+    assert [a.object_id for a in load_library(library, split="val")] == ["microwave-0001"]

@@ -85,6 +85,12 @@ def _check_names(kind: str, given: Iterable[str] | None, valid: Iterable[str]) -
             raise ValueError(f"unknown {kind} {name!r}; valid {kind}s: {', '.join(valid) or '(none)'}")
 
 
+def is_generated_library(folder: Path) -> bool:
+    """True for a folder ``wpbench assets generate`` wrote (it has ``split.json``): its objects are
+    read as they are, never loaded or decomposed as PartNet-Mobility objects."""
+    return (Path(folder) / "split.json").is_file()
+
+
 def _load_split_folder(folder: Path, split: str | None) -> list[FurnitureAsset]:
     meta = json.loads((folder / "split.json").read_text())
     ids = [(i, s) for s in SPLITS if split in (None, s) for i in meta.get(s, [])]
@@ -146,7 +152,7 @@ def load_library(
         folder = Path(source).expanduser()
         if not folder.is_dir():
             raise ValueError(f"asset source {str(source)!r} is neither 'procedural' nor an existing folder")
-        if (folder / "split.json").is_file():
+        if is_generated_library(folder):
             assets = _load_split_folder(folder, split)
         elif importlib.util.find_spec("wpbench.assets.partnet") is not None:
             from wpbench.assets.partnet import load_partnet_folder

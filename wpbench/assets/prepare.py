@@ -85,10 +85,14 @@ def prepare_folder(root: Path, workers: int | None = None, cache_dir: Path | Non
 
 
 def prepare_asset_sources(sources: Iterable[str], progress: bool = False) -> None:
-    """:func:`prepare_folder` for every distinct folder among the asset sources ``sources``
-    ("procedural" needs nothing): what worker processes about to load these objects would
-    otherwise each decompose, done once here."""
+    """:func:`prepare_folder` for every distinct PartNet-Mobility folder among the asset sources
+    ``sources`` ("procedural" and generated libraries carry their own collision boxes and need
+    nothing): what worker processes about to load these objects would otherwise each
+    decompose, done once here."""
+    from wpbench.assets.library import is_generated_library
+
     folders = {Path(source).expanduser().resolve() for source in sources if source != "procedural"}
+    folders = {folder for folder in folders if not is_generated_library(folder)}
     for folder in sorted(folders):
         prepare_folder(folder, progress=progress)
 
