@@ -51,6 +51,21 @@ def test_the_table_names_what_each_policy_was_trained_on():
     assert "its weights were" not in render(cfg, {}, {})
 
 
+def test_the_table_says_when_a_policy_was_trained_with_door_goals_past_the_stop(tmp_path, monkeypatch):
+    import json
+
+    import wpbench.weights
+    from wpbench.weights import shipped_weights_root
+
+    shipped = json.loads((shipped_weights_root() / "gf" / "config.json").read_text())
+    (tmp_path / "gf").mkdir()
+    (tmp_path / "gf" / "config.json").write_text(json.dumps(
+        {**shipped, "train_config": {**shipped.get("train_config", {}), "door_past_stop_deg": 10.0}}))
+    monkeypatch.setattr(wpbench.weights, "shipped_weights_root", lambda: tmp_path)
+    text = training_data(PaperTableConfig(policies=("gf",)), "gf")
+    assert text.startswith("trained on ") and text.endswith(", door goals 10 deg past the stop")
+
+
 def test_category_rows_show_each_category_of_each_kind():
     cfg = PaperTableConfig(policies=("gf",))
     by_category = {"gf": {"articulated": {"oven": {"rot_deg": 2.5, "trans_m": 0.031, "point_m": 0.03, "n": 5},

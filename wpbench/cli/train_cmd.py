@@ -64,6 +64,10 @@ def train(
         None, min=0.0, max=180.0,
         help="Symmetric objects: train towards another equivalent goal once the prediction is within this "
              "many degrees of it; 180 = always the nearest [default: the policy's]."),
+    door_past_stop: float = typer.Option(
+        0.0, "--door-past-stop", min=0.0, max=89.9, metavar="DEG",
+        help="Train every door towards its stop turned DEG further about its hinge: the stop is hidden, and a door "
+             "driven past it is held there (wpbench.training.past_stop). Validation keeps the true goals."),
     restart: bool = typer.Option(False, help="Ignore an existing checkpoint and start from scratch."),
     select_best: bool = typer.Option(False, "--select-best",
                                      help="Do not train: write WEIGHTS_ROOT/best.json from the trained WeightedPose variants."),
@@ -114,6 +118,7 @@ def train(
             lr_schedule=lr_schedule,
             num_action_points=num_action_points, num_anchor_points=num_anchor_points, augment_yaw=augment, augment_mirror=mirror, augment_scale=scale,
             augment_stretch=stretch, retarget_within_deg=retarget_within,
+            door_past_stop_deg=door_past_stop,
             val_per_kind=val_per_kind, final_val_per_kind=final_val_per_kind, seed=seed, threads=threads,
             model_overrides=overrides, loss_weights=loss_weights,
         )

@@ -108,7 +108,9 @@ def training_data(cfg: PaperTableConfig, policy: str) -> str:
     from wpbench.weights import read_config, shipped_weights_root
 
     def of(name: str) -> str:
-        return describe_data(read_config(shipped_weights_root() / name, name).get("data") or {})
+        config = read_config(shipped_weights_root() / name, name)
+        past_stop = (config.get("train_config") or {}).get("door_past_stop_deg", 0.0)
+        return describe_data(config.get("data") or {}) + (f", door goals {past_stop:g} deg past the stop" if past_stop else "")
 
     if policy == "oracle":
         return "; ".join(f"{kind}: {name} {of(name)}" for kind, name in _oracle_specialists().items())

@@ -25,6 +25,7 @@ from wpbench.models.loss_presets import compute_loss
 from wpbench.training import log as train_log
 from wpbench.training.batches import make_batch, prepare
 from wpbench.training.checkpoint import load_checkpoint, save_checkpoint
+from wpbench.training.past_stop import turn_doors_past_stop
 from wpbench.training.config import TrainConfig
 from wpbench.training.data_mix import load_mix, mix_hash, mix_record, training_batches
 from wpbench.training.evaluate import evaluate, mean_point_error
@@ -136,6 +137,11 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     train_set, val_set, data_hashes, mix = _load_data(config, spec)
+    if config.door_past_stop_deg > 0:
+        train_set.gt_transform, train_set.gt_equivalents, turned = turn_doors_past_stop(
+            train_set.gt_transform, train_set.gt_equivalents, train_set.kind, config.door_past_stop_deg)
+        echo(f"door goals turned {config.door_past_stop_deg:g} deg past the stop in {turned} training samples; "
+             f"validation keeps the true goals")
     model, origin = build_policy_model(spec, config)
     lr = config.learning_rate if config.learning_rate is not None else spec.learning_rate
     warmup = config.mixing_warmup if config.mixing_warmup is not None else spec.mixing_warmup
@@ -150,6 +156,12 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
             raise ValueError(
                 f"{out}/checkpoint.pt belongs to policy {state['policy']!r} on data {state['data']}, not "
                 f"{config.policy!r} on {data_hashes}; pass --restart to start over or choose another --out"
+            )
+        past_stop = state.get("door_past_stop_deg", 0.0)
+        if past_stop != config.door_past_stop_deg:
+            raise ValueError(
+                f"{out}/checkpoint.pt was trained with door goals {past_stop:g} deg past the stop, not "
+                f"{config.door_past_stop_deg:g}; pass --restart to start over or choose another --out"
             )
         model.load_state_dict(state["model"])
         optimizer.load_state_dict(state["optimizer"])
@@ -239,7 +251,8 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
                "lr": optimizer.param_groups[0]["lr"], "mixing_only": int(mixing_only),
                **{k: v / good for k, v in sums.items()}, **_val_row(results)}
         rows.append(row)
-        save_checkpoint(out, {"policy": config.policy, "data": data_hashes, "model": model.state_dict(),
+        save_checkpoint(out, {"policy": config.policy, "data": data_hashes, "door_past_stop_deg": config.door_past_stop_deg,
+                              "model": model.state_dict(),
                               "optimizer": optimizer.state_dict(), "generator": generator.get_state(),
                               "epoch": epoch, "step": step, "elapsed_s": elapsed, "rows": rows, "drawn_by_data": drawn,
                               "train_config": config.to_json()})

@@ -1,0 +1,60 @@
+"""Door goals turned past the stop: a training target for doors whose stop no cloud shows.
+
+A hinged door's stop sits in its hinge, so a model can only guess it from the kind of
+furniture and regresses to the middle of the stops it was trained on. A door whose stop
+lies beyond that guess is left short of open, while a door driven past its stop is held
+there by every executor (the ``ideal`` one clamps to the joint limits; a hand stalls
+against the stop and lets go). With ``degrees`` > 0, :func:`turn_doors_past_stop` turns
+the goal of every door sample that much further about its own hinge, so the model learns
+to aim past the stop and the door ends at it. Drawers (no rotation) are left as they are.
+
+The screw of each goal (hinge axis, point, angle, slide) comes from
+``wpbench.sim.screw_path``; the goal at fraction ``(angle + extra) / angle`` of that screw
+is the door turned ``extra`` further about the same hinge.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from wpbench.names import ARTICULATED, KIND_CODE
+from wpbench.sim.screw_path import screw_at, screw_of
+
+# A goal that turns less than this is a drawer's slide (or a door already at its stop),
+# whose hinge cannot be read from the goal: it is left as it is.
+MIN_DOOR_TURN_DEG = 1.0
+
+
+def turn_doors_past_stop(gt_transform: torch.Tensor, gt_equivalents: torch.Tensor, kind: torch.Tensor,
+                         degrees: float) -> tuple[torch.Tensor, torch.Tensor, int]:
+    """Every articulated goal that turns by at least ``MIN_DOOR_TURN_DEG``, turned ``degrees`` further.
+
+    gt_transform (N, 4, 4), gt_equivalents (N, K, 4, 4) (an articulated sample's rows all
+    repeat its goal), kind (N,) codes of ``wpbench.data.config.KIND_CODE`` ->
+    (new gt_transform, new gt_equivalents, number of goals turned), in the input dtypes.
+    ``degrees`` must be in [0, 90).
+    """
+    if not 0.0 <= degrees < 90.0:
+        raise ValueError(f"degrees past the stop must be in [0, 90), got {degrees}")
+    if gt_transform.dim() != 3 or gt_transform.shape[1:] != (4, 4):
+        raise ValueError(f"gt_transform must have shape (N, 4, 4), got {tuple(gt_transform.shape)}")
+    N = gt_transform.shape[0]
+    if gt_equivalents.dim() != 4 or gt_equivalents.shape[0] != N or gt_equivalents.shape[2:] != (4, 4):
+        raise ValueError(f"gt_equivalents must have shape (N, K, 4, 4) with N = {N}, got {tuple(gt_equivalents.shape)}")
+    if kind.shape != (N,):
+        raise ValueError(f"kind must have shape (N,) with N = {N}, got {tuple(kind.shape)}")
+    goals, table = gt_transform.clone(), gt_equivalents.clone()
+    if degrees == 0.0:
+        return goals, table, 0
+    extra = np.deg2rad(degrees)
+    turned = 0
+    for i in torch.nonzero(kind == KIND_CODE[ARTICULATED]).flatten().tolist():
+        screw = screw_of(gt_transform[i].double().numpy())
+        if np.rad2deg(screw.angle) < MIN_DOOR_TURN_DEG:
+            continue
+        further = torch.from_numpy(screw_at(screw, (screw.angle + extra) / screw.angle)).to(goals.dtype)
+        goals[i] = further
+        table[i] = further
+        turned += 1
+    return goals, table, turned
