@@ -1,10 +1,13 @@
 """Shared by the executor tests: one stage carried out with a transform of the true
-cross-pose, and the true cross-pose turned 30 deg about a random axis."""
+cross-pose, the true cross-pose turned 30 deg about a random axis, and a door's true
+cross-pose turned further or less about its own hinge."""
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+from wpbench.sim.screw_path import screw_at, screw_of
 
 
 def step_with(env, seed: int, transform_of) -> dict:
@@ -21,3 +24,9 @@ def rotated_30(T: np.ndarray, seed: int) -> np.ndarray:
     R = np.eye(4)
     R[:3, :3] = Rotation.from_rotvec(np.radians(30) * axis / np.linalg.norm(axis)).as_matrix()
     return R @ T
+
+
+def turned_about_hinge(T: np.ndarray, degrees: float) -> np.ndarray:
+    """A door's cross-pose ``T`` (4, 4) turned ``degrees`` further (negative: less) about its own hinge."""
+    screw = screw_of(np.asarray(T))
+    return screw_at(screw, (screw.angle + np.radians(degrees)) / screw.angle)

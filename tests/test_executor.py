@@ -10,6 +10,7 @@ import pytest
 from wpbench import tasks  # noqa: F401
 from wpbench.sim.executor import best_joint_value
 from wpbench.sim.observation import sample_mesh_surface
+from executor_helpers import step_with, turned_about_hinge
 
 
 @pytest.fixture(scope="module")
@@ -37,6 +38,14 @@ def test_best_joint_value_recovers_the_joint(door_env, fraction):
     surface = sample_mesh_surface(f.world_mesh([f.target_link]), 512, np.random.default_rng(0))
     q = best_joint_value(f, goal @ np.linalg.inv(now), surface)
     assert abs(q - q_goal) < 1e-3
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])   # a cabinet door, a dishwasher's, a safe's
+def test_a_door_driven_past_its_stop_is_held_there_and_one_left_short_is_not_open(door_env, seed):
+    past = step_with(door_env, seed, lambda T: turned_about_hinge(T, 20.0))
+    assert past["success"] and past["open_distance"] < 1e-3, past["failure_reason"]
+    short = step_with(door_env, seed, lambda T: turned_about_hinge(T, -20.0))
+    assert not short["success"] and short["failure_reason"] == "not_open_enough" and short["open_distance"] > 0.15
 
 
 def test_half_open_prediction_is_not_a_success(door_env):

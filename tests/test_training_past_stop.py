@@ -45,13 +45,17 @@ def test_a_door_turned_100_deg_about_a_known_hinge_becomes_the_same_door_turned_
         np.testing.assert_allclose(row.numpy(), expected, atol=1e-12)
 
 
-def test_an_oven_door_hinged_at_the_bottom_turns_further_down_about_its_own_hinge():
-    # Bottom hinge along x at height 0.1: turning 90 deg brings the door's top (0, 0, 0.7) forward
-    # to (0, 0.6, 0.1); 10 deg further puts it below the hinge.
-    goals, _, _ = _turn([_door_goal([1.0, 0.0, 0.0], [0.0, 0.0, 0.1], -90.0)], [ARTICULATED], 10.0)
-    top = goals[0].numpy() @ np.array([0.0, 0.0, 0.7, 1.0])
-    a = np.deg2rad(100.0)
-    np.testing.assert_allclose(top[:3], [0.0, 0.6 * np.sin(a), 0.1 + 0.6 * np.cos(a)], atol=1e-12)
+def test_a_door_hinged_at_the_bottom_or_top_is_left_at_its_stop():
+    # An oven's door: its hinge along x; turned past the horizontal its top would head for the floor.
+    oven = _door_goal([1.0, 0.0, 0.0], [0.0, 0.0, 0.1], -90.0)
+    tilted = _door_goal([np.sin(np.deg2rad(35.0)), 0.0, np.cos(np.deg2rad(35.0))], [0.3, 0.0, 0.0], 80.0)
+    leaning = _door_goal([np.sin(np.deg2rad(25.0)), 0.0, np.cos(np.deg2rad(25.0))], [0.3, 0.0, 0.0], 80.0)
+    goals, _, turned = _turn([oven, tilted, leaning], [ARTICULATED] * 3, 10.0)
+    assert turned == 1
+    np.testing.assert_array_equal(goals[0].numpy(), oven)
+    np.testing.assert_array_equal(goals[1].numpy(), tilted)
+    expected = _door_goal([np.sin(np.deg2rad(25.0)), 0.0, np.cos(np.deg2rad(25.0))], [0.3, 0.0, 0.0], 90.0)
+    np.testing.assert_allclose(goals[2].numpy(), expected, atol=1e-12)
 
 
 def test_drawers_free_objects_and_doors_already_at_their_stop_are_left_as_they_are():
@@ -78,12 +82,15 @@ def test_zero_degrees_changes_nothing_and_a_copy_is_returned():
     assert original[0, 0, 0] != 5.0
 
 
-unit_vectors = st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: np.linalg.norm(v) > 0.2)
+# Side hinges: at most 25 deg from vertical, pointing up or down.
+side_hinges = st.builds(lambda tilt, heading, up: [np.sin(tilt) * np.cos(heading), np.sin(tilt) * np.sin(heading),
+                                                   np.cos(tilt) * (1 if up else -1)],
+                        st.floats(0.0, np.deg2rad(25.0)), st.floats(0.0, 2 * np.pi), st.booleans())
 points = st.tuples(*[st.floats(-1, 1)] * 3)
 
 
 @settings(max_examples=60, deadline=None)
-@given(axis=unit_vectors, point=points, degrees=st.floats(5.0, 160.0), a=st.floats(0.0, 10.0), b=st.floats(0.0, 10.0))
+@given(axis=side_hinges, point=points, degrees=st.floats(5.0, 160.0), a=st.floats(0.0, 10.0), b=st.floats(0.0, 10.0))
 def test_every_point_on_the_hinge_stays_and_the_turn_grows_by_exactly_the_extra(axis, point, degrees, a, b):
     T = _door_goal(axis, point, degrees)
     once, _, _ = _turn([T], [ARTICULATED], a + b)

@@ -66,7 +66,7 @@ def train(
              "many degrees of it; 180 = always the nearest [default: the policy's]."),
     door_past_stop: float = typer.Option(
         0.0, "--door-past-stop", min=0.0, max=89.9, metavar="DEG",
-        help="Train every door towards its stop turned DEG further about its hinge: the stop is hidden, and a door "
+        help="Train every side-hinged door towards its stop turned DEG further about its hinge: the stop is hidden, and a door "
              "driven past it is held there (wpbench.training.past_stop). Validation keeps the true goals."),
     restart: bool = typer.Option(False, help="Ignore an existing checkpoint and start from scratch."),
     select_best: bool = typer.Option(False, "--select-best",

@@ -1,12 +1,17 @@
 """Door goals turned past the stop: a training target for doors whose stop no cloud shows.
 
-A hinged door's stop sits in its hinge, so a model can only guess it from the kind of
+A side-hinged door's stop sits in its hinge, so a model can only guess it from the kind of
 furniture and regresses to the middle of the stops it was trained on. A door whose stop
 lies beyond that guess is left short of open, while a door driven past its stop is held
 there by every executor (the ``ideal`` one clamps to the joint limits; a hand stalls
 against the stop and lets go). With ``degrees`` > 0, :func:`turn_doors_past_stop` turns
-the goal of every door sample that much further about its own hinge, so the model learns
-to aim past the stop and the door ends at it. Drawers (no rotation) are left as they are.
+the goal of every side-hinged door sample that much further about its own hinge, so the
+model learns to aim past the stop and the door ends at it.
+
+Left as they are: drawers (no rotation), and doors hinged at the bottom (ovens,
+dishwashers; hinge more than ``MAX_HINGE_TILT_DEG`` from vertical). Those open down to
+the horizontal, where real ones stop as well, and turned further their far edge heads for
+the floor, where a hand following it is refused (the gripper's path under the floor).
 
 The screw of each goal (hinge axis, point, angle, slide) comes from
 ``wpbench.sim.screw_path``; the goal at fraction ``(angle + extra) / angle`` of that screw
@@ -24,11 +29,14 @@ from wpbench.sim.screw_path import screw_at, screw_of
 # A goal that turns less than this is a drawer's slide (or a door already at its stop),
 # whose hinge cannot be read from the goal: it is left as it is.
 MIN_DOOR_TURN_DEG = 1.0
+# A hinge within this angle of vertical is a side hinge; the rest are top or bottom hinges.
+MAX_HINGE_TILT_DEG = 30.0
 
 
 def turn_doors_past_stop(gt_transform: torch.Tensor, gt_equivalents: torch.Tensor, kind: torch.Tensor,
                          degrees: float) -> tuple[torch.Tensor, torch.Tensor, int]:
-    """Every articulated goal that turns by at least ``MIN_DOOR_TURN_DEG``, turned ``degrees`` further.
+    """Every articulated goal that turns by at least ``MIN_DOOR_TURN_DEG`` about a side hinge
+    (within ``MAX_HINGE_TILT_DEG`` of the world's z axis), turned ``degrees`` further.
 
     gt_transform (N, 4, 4), gt_equivalents (N, K, 4, 4) (an articulated sample's rows all
     repeat its goal), kind (N,) codes of ``wpbench.data.config.KIND_CODE`` ->
@@ -52,6 +60,8 @@ def turn_doors_past_stop(gt_transform: torch.Tensor, gt_equivalents: torch.Tenso
     for i in torch.nonzero(kind == KIND_CODE[ARTICULATED]).flatten().tolist():
         screw = screw_of(gt_transform[i].double().numpy())
         if np.rad2deg(screw.angle) < MIN_DOOR_TURN_DEG:
+            continue
+        if abs(screw.axis[2]) < np.cos(np.deg2rad(MAX_HINGE_TILT_DEG)):
             continue
         further = torch.from_numpy(screw_at(screw, (screw.angle + extra) / screw.angle)).to(goals.dtype)
         goals[i] = further
