@@ -64,6 +64,11 @@ def test_the_table_says_when_a_policy_was_trained_with_door_goals_past_the_stop(
     monkeypatch.setattr(wpbench.weights, "shipped_weights_root", lambda: tmp_path)
     text = training_data(PaperTableConfig(policies=("gf",)), "gf")
     assert text.startswith("trained on ") and text.endswith(", door goals 10 deg past the stop")
+    (tmp_path / "gf" / "config.json").write_text(json.dumps(
+        {**shipped, "train_config": {**shipped.get("train_config", {}), "door_past_stop_deg": 20.0,
+                                     "door_max_turn_deg": 150.0}}))
+    text = training_data(PaperTableConfig(policies=("gf",)), "gf")
+    assert text.endswith(", door goals 20 deg past the stop (at most 150 deg in all)")
 
 
 def test_category_rows_show_each_category_of_each_kind():

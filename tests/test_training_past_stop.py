@@ -28,11 +28,11 @@ def _door_goal(axis, point, degrees: float) -> np.ndarray:
     return T
 
 
-def _turn(goals: list[np.ndarray], kinds: list[str], degrees: float):
+def _turn(goals: list[np.ndarray], kinds: list[str], degrees: float, max_turn_deg: float | None = None):
     T = torch.tensor(np.stack(goals))
     table = T[:, None].repeat(1, 3, 1, 1)
     kind = torch.tensor([KIND_CODE[k] for k in kinds])
-    return turn_doors_past_stop(T, table, kind, degrees)
+    return turn_doors_past_stop(T, table, kind, degrees, max_turn_deg)
 
 
 def test_a_door_turned_100_deg_about_a_known_hinge_becomes_the_same_door_turned_110():
@@ -71,6 +71,23 @@ def test_drawers_free_objects_and_doors_already_at_their_stop_are_left_as_they_a
         np.testing.assert_array_equal(goals[i].numpy(), before[i])
         np.testing.assert_array_equal(table[i, 2].numpy(), before[i])
     np.testing.assert_allclose(goals[3].numpy(), _door_goal([0.0, 0.0, 1.0], [0.5, 0.0, 0.0], 72.0), atol=1e-12)
+
+
+def test_a_cap_on_the_whole_turn_stops_wide_doors_at_it_and_leaves_narrow_ones_their_full_extra():
+    hinge = ([0.0, 0.0, 1.0], [0.4, 0.1, 0.0])
+    stops = [100.0, 137.0, 145.0, 150.0, 160.0]
+    goals, table, turned = _turn([_door_goal(*hinge, d) for d in stops], [ARTICULATED] * 5, 20.0, max_turn_deg=150.0)
+    assert turned == 3                          # 150 and 160 are at or beyond the cap already
+    for got, want in zip(goals, [120.0, 150.0, 150.0, 150.0, 160.0]):
+        np.testing.assert_allclose(got.numpy(), _door_goal(*hinge, want), atol=1e-12)
+    np.testing.assert_allclose(table[1, 0].numpy(), _door_goal(*hinge, 150.0), atol=1e-12)
+
+
+@pytest.mark.parametrize("cap", [0.0, 181.0, float("nan")])
+def test_a_cap_outside_0_to_180_degrees_is_refused(cap):
+    T = torch.eye(4)[None]
+    with pytest.raises(ValueError, match="max_turn_deg"):
+        turn_doors_past_stop(T, T[:, None], torch.tensor([0]), 10.0, cap)
 
 
 def test_zero_degrees_changes_nothing_and_a_copy_is_returned():
@@ -151,5 +168,7 @@ def test_the_trainer_trains_on_turned_goals_records_it_and_refuses_to_resume_wit
     import json
     assert json.loads((tmp_path / "run" / "config.json").read_text())["train_config"]["door_past_stop_deg"] == 15.0
 
-    with pytest.raises(ValueError, match="15 deg past the stop, not 0"):
+    with pytest.raises(ValueError, match="15 deg past the stop, not 0 deg past the stop"):
         train(TrainConfig(**{**base, "max_steps": 2}), echo=lambda _: None)
+    with pytest.raises(ValueError, match=r"15 deg past the stop, not 15 deg past the stop \(at most 120 deg in all\)"):
+        train(TrainConfig(**{**base, "max_steps": 2}, door_past_stop_deg=15.0, door_max_turn_deg=120.0), echo=lambda _: None)

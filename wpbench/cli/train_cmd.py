@@ -68,6 +68,10 @@ def train(
         0.0, "--door-past-stop", min=0.0, max=89.9, metavar="DEG",
         help="Train every side-hinged door towards its stop turned DEG further about its hinge: the stop is hidden, and a door "
              "driven past it is held there (wpbench.training.past_stop). Validation keeps the true goals."),
+    door_max_turn: float = typer.Option(
+        None, "--door-max-turn", min=0.1, max=180.0, metavar="DEG",
+        help="With --door-past-stop: a turned door goal turns at most DEG in all, so a wide door (a fridge) is not aimed "
+             "beyond an arm's reach [default: no cap]."),
     restart: bool = typer.Option(False, help="Ignore an existing checkpoint and start from scratch."),
     select_best: bool = typer.Option(False, "--select-best",
                                      help="Do not train: write WEIGHTS_ROOT/best.json from the trained WeightedPose variants."),
@@ -118,7 +122,7 @@ def train(
             lr_schedule=lr_schedule,
             num_action_points=num_action_points, num_anchor_points=num_anchor_points, augment_yaw=augment, augment_mirror=mirror, augment_scale=scale,
             augment_stretch=stretch, retarget_within_deg=retarget_within,
-            door_past_stop_deg=door_past_stop,
+            door_past_stop_deg=door_past_stop, door_max_turn_deg=door_max_turn,
             val_per_kind=val_per_kind, final_val_per_kind=final_val_per_kind, seed=seed, threads=threads,
             model_overrides=overrides, loss_weights=loss_weights,
         )

@@ -109,8 +109,10 @@ def training_data(cfg: PaperTableConfig, policy: str) -> str:
 
     def of(name: str) -> str:
         config = read_config(shipped_weights_root() / name, name)
-        past_stop = (config.get("train_config") or {}).get("door_past_stop_deg", 0.0)
-        return describe_data(config.get("data") or {}) + (f", door goals {past_stop:g} deg past the stop" if past_stop else "")
+        train_config = config.get("train_config") or {}
+        past_stop, cap = train_config.get("door_past_stop_deg", 0.0), train_config.get("door_max_turn_deg")
+        capped = f" (at most {cap:g} deg in all)" if cap is not None else ""
+        return describe_data(config.get("data") or {}) + (f", door goals {past_stop:g} deg past the stop{capped}" if past_stop else "")
 
     if policy == "oracle":
         return "; ".join(f"{kind}: {name} {of(name)}" for kind, name in _oracle_specialists().items())

@@ -86,6 +86,8 @@ class TrainConfig:
     # Turn every door's training goal this many degrees past its stop (wpbench.training.past_stop);
     # validation keeps the true goals. 0 = the goals as generated.
     door_past_stop_deg: float = 0.0
+    # Cap on a turned door goal's whole turn (deg); None = no cap.
+    door_max_turn_deg: float | None = None
     val_per_kind: int = 32
     final_val_per_kind: int = 200
     seed: int = 0
@@ -122,6 +124,8 @@ class TrainConfig:
             raise ValueError(f"retarget_within_deg must be in [0, 180] degrees, got {self.retarget_within_deg}")
         if not 0.0 <= self.door_past_stop_deg < 90.0:
             raise ValueError(f"door_past_stop_deg must be in [0, 90) degrees, got {self.door_past_stop_deg}")
+        if self.door_max_turn_deg is not None and not 0.0 < self.door_max_turn_deg <= 180.0:
+            raise ValueError(f"door_max_turn_deg must be in (0, 180] degrees, got {self.door_max_turn_deg}")
         if self.mixing_warmup is not None and not 0.0 <= self.mixing_warmup < 1.0:
             raise ValueError(f"mixing_warmup must be in [0, 1), got {self.mixing_warmup}")
         self.loss_preset()  # unknown terms or negative weights fail here, before any data is read

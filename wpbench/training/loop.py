@@ -128,6 +128,11 @@ def _val_row(results: dict[str, dict[str, float]]) -> dict[str, float]:
     return row
 
 
+def _door_goals_text(past_stop_deg: float, max_turn_deg: float | None) -> str:
+    cap = "" if max_turn_deg is None else f" (at most {max_turn_deg:g} deg in all)"
+    return f"{past_stop_deg:g} deg past the stop{cap}"
+
+
 def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: bool = False) -> dict:
     """Train ``config.policy``; resumes from ``config.out/checkpoint.pt`` unless ``restart``."""
     spec = get_spec(config.policy)
@@ -139,9 +144,10 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
     train_set, val_set, data_hashes, mix = _load_data(config, spec)
     if config.door_past_stop_deg > 0:
         train_set.gt_transform, train_set.gt_equivalents, turned = turn_doors_past_stop(
-            train_set.gt_transform, train_set.gt_equivalents, train_set.kind, config.door_past_stop_deg)
-        echo(f"door goals turned {config.door_past_stop_deg:g} deg past the stop in {turned} training samples; "
-             f"validation keeps the true goals")
+            train_set.gt_transform, train_set.gt_equivalents, train_set.kind, config.door_past_stop_deg,
+            config.door_max_turn_deg)
+        echo(f"door goals turned {_door_goals_text(config.door_past_stop_deg, config.door_max_turn_deg)} in {turned} "
+             f"training samples; validation keeps the true goals")
     model, origin = build_policy_model(spec, config)
     lr = config.learning_rate if config.learning_rate is not None else spec.learning_rate
     warmup = config.mixing_warmup if config.mixing_warmup is not None else spec.mixing_warmup
@@ -157,11 +163,12 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
                 f"{out}/checkpoint.pt belongs to policy {state['policy']!r} on data {state['data']}, not "
                 f"{config.policy!r} on {data_hashes}; pass --restart to start over or choose another --out"
             )
-        past_stop = state.get("door_past_stop_deg", 0.0)
-        if past_stop != config.door_past_stop_deg:
+        past_stop = (state.get("door_past_stop_deg", 0.0), state.get("door_max_turn_deg"))
+        if past_stop != (config.door_past_stop_deg, config.door_max_turn_deg):
             raise ValueError(
-                f"{out}/checkpoint.pt was trained with door goals {past_stop:g} deg past the stop, not "
-                f"{config.door_past_stop_deg:g}; pass --restart to start over or choose another --out"
+                f"{out}/checkpoint.pt was trained with door goals {_door_goals_text(*past_stop)}, not "
+                f"{_door_goals_text(config.door_past_stop_deg, config.door_max_turn_deg)}; pass --restart to start over "
+                f"or choose another --out"
             )
         model.load_state_dict(state["model"])
         optimizer.load_state_dict(state["optimizer"])
@@ -252,6 +259,7 @@ def train(config: TrainConfig, echo: Callable[[str], None] = print, restart: boo
                **{k: v / good for k, v in sums.items()}, **_val_row(results)}
         rows.append(row)
         save_checkpoint(out, {"policy": config.policy, "data": data_hashes, "door_past_stop_deg": config.door_past_stop_deg,
+                              "door_max_turn_deg": config.door_max_turn_deg,
                               "model": model.state_dict(),
                               "optimizer": optimizer.state_dict(), "generator": generator.get_state(),
                               "epoch": epoch, "step": step, "elapsed_s": elapsed, "rows": rows, "drawn_by_data": drawn,
