@@ -9,8 +9,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from wpbench.sim.side_entry import (face_yaws, held_box, is_roofed, path_poses, plan_side_entry, poses_hit,
-                                    surface_clearance)
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from wpbench.sim.side_entry import (FLOOR_GAP, PREGRASP, face_yaws, hand_box, held_box, is_roofed, path_poses,
+                                    plan_side_entry, poses_hit, segment_poses, surface_clearance)
 
 SPACING = 0.015
 
@@ -112,6 +115,52 @@ def test_face_that_looks_at_the_furniture_is_reached_after_a_turn():
     obj = _block(start)
     plan = plan_side_entry(obj, anchor, _move(start, goal, np.pi), viewpoint=np.array([2.0, 0.0, 1.5]))
     assert plan is not None and plan.regrasp_turn != 0.0
+
+
+def _lowest_hand_z_on_approach(pick):
+    """The lowest any corner of the hand box gets while coming in to ``pick`` from PREGRASP back."""
+    pre = pick.copy()
+    pre[:3, 3] -= PREGRASP * pick[:3, 2]
+    lo, hi = hand_box()
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    return min(float((corners @ T[:3, :3].T + T[:3, 3])[:, 2].min()) for T in segment_poses(pre, pick))
+
+
+@settings(max_examples=10, deadline=None)
+@given(tilt_deg=st.floats(0.0, 6.0), axis_yaw=st.floats(0.0, 2 * np.pi))
+def test_a_tilted_goal_still_gets_a_pick_whose_approach_clears_the_floor(tilt_deg, axis_yaw):
+    """A predicted goal a few degrees off level tilts the hand at the pick by as much, so its
+    approach from PREGRASP back dips towards the floor. The cup is raised on the face just
+    enough: the plan exists for every small tilt, and its approach keeps FLOOR_GAP above the
+    floor, not less (a pick decided by millimetres of the prediction flips between plans)."""
+    anchor = _cabinet()
+    tilt = np.radians(tilt_deg)
+    # The tilted block's lowest corner stays 4 mm above the cavity's floor (z = 0.3).
+    start, goal = np.array([1.0, 0.0, 0.05]), np.array([-0.05, 0.0, 0.304 + 0.05 * (np.cos(tilt) + np.sqrt(2) * np.sin(tilt))])
+    obj = _block(start)
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec(tilt * np.array([np.cos(axis_yaw), np.sin(axis_yaw), 0.0])).as_matrix()
+    T[:3, 3] = goal - T[:3, :3] @ start
+    plan = plan_side_entry(obj, anchor, T, viewpoint=np.array([2.0, 0.0, 1.5]))
+    assert plan is not None
+    floor = float(obj[:, 2].min())
+    assert _lowest_hand_z_on_approach(plan.pick) >= floor + FLOOR_GAP - 1e-6
+
+
+def test_an_overhang_in_front_is_passed_under_from_a_lead_in():
+    """An awning over the cabinet's front leaves nothing clear straight above any staging pose:
+    the plan still finds a way in (under the awning), and stays clear of the cloud."""
+    rng = np.random.default_rng(0)
+    anchor = np.concatenate([_cabinet(rng=rng), _plane([0.25, -0.3, 1.0], [0.75, 0, 0], [0, 0.6, 0], rng)])
+    start, goal = np.array([1.4, 0.5, 0.05]), np.array([-0.05, 0.0, 0.352])
+    obj = _block(start)
+    T = _move(start, goal, 0.0)
+    plan = plan_side_entry(obj, anchor, T, viewpoint=np.array([2.0, 0.0, 1.5]))
+    assert plan is not None
+    np.testing.assert_allclose(plan.direction, [1.0, 0.0, 0.0], atol=1e-6)
+    carry = plan.carry_waypoints()
+    boxes = [held_box(obj @ T[:3, :3].T + T[:3, 3], plan.goal), hand_box()]
+    assert not poses_hit(anchor, path_poses(carry[1:-1]), boxes, surface_clearance(anchor))
 
 
 def test_bad_shapes_are_clear_errors():

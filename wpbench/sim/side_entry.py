@@ -191,15 +191,19 @@ def surface_clearance(anchor_points: np.ndarray) -> float:
 
 
 def _staging_distance(anchor: np.ndarray, boxes, inserted: np.ndarray, out: np.ndarray,
-                      clearance: float) -> float | None:
-    """The least distance out along ``out`` at which the held object and hand have slid clear
-    of the cavity: the straight slide from there to ``inserted`` hits no anchor point, and
-    nothing is above the staging pose (the carry comes down onto it). None when none up to MAX_STAGING.
+                      clearance: float) -> tuple[float, bool] | None:
+    """(distance, overhung): the least distance out along ``out`` at which the held object and
+    hand have slid clear of the cavity: the straight slide from there to ``inserted`` hits no
+    anchor point, and nothing is above the staging pose (the carry comes down onto it);
+    overhung False. When something stays above every clear staging pose (an open door's edge,
+    a lip), the farthest clear one with overhung True: the carry then has to come in level from
+    a lead-in, which the carry check decides. None when the slide is blocked at the goal itself.
 
     ``inserted`` is a side-entry TCP pose (x up, z = -out), so the slide sweeps each box
     along its own z axis and the column above it extends the box along x.
     """
     local = (anchor - inserted[:3, 3]) @ inserted[:3, :3]
+    farthest_clear = None
     for distance in np.arange(0.0, MAX_STAGING + 1e-9, STAGING_STEP):
         slide_hit = column_hit = False
         for lo, hi in boxes:
@@ -210,23 +214,48 @@ def _staging_distance(anchor: np.ndarray, boxes, inserted: np.ndarray, out: np.n
                                      & (local[:, 2] < hi[2] + clearance)))
             column_hit |= bool(np.any(across & up & (local[:, 2] > lo[2] - distance - clearance)
                                       & (local[:, 2] < hi[2] - distance + clearance)))
-        if slide_hit:
-            return None          # a longer slide sweeps this one too
+        if slide_hit:            # a longer slide sweeps this one too
+            return None if farthest_clear is None else (farthest_clear, True)
         if not column_hit:
-            return float(distance)
-    return None
+            return float(distance), False
+        farthest_clear = float(distance)
+    return None if farthest_clear is None else (farthest_clear, True)
+
+
+def _approach_poses(pick: np.ndarray) -> np.ndarray:
+    """(K, 4, 4) TCP poses of the hand coming in along the pick's approach from PREGRASP back."""
+    return segment_poses(_shifted(pick, -PREGRASP * pick[:3, 2]), pick)
+
+
+def _lowest_hand_z(poses: np.ndarray) -> float:
+    """The lowest height any corner of the hand box reaches over the TCP ``poses`` (K, 4, 4)."""
+    lo, hi = hand_box()
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    return float((np.einsum("kj,nj->kn", poses[:, 2, :3], corners) + poses[:, 2, 3:4]).min())
+
+
+def _lift_clear_of_floor(goal: np.ndarray, cross_pose: np.ndarray, floor: float, top: float) -> np.ndarray | None:
+    """The goal TCP (4, 4), raised just so far that at the pick (``inv(cross_pose) @ goal``) the
+    hand's whole approach keeps FLOOR_GAP above ``floor``; None when that puts the cup above
+    ``top`` (the face's top edge less CUP_EDGE). Exact, so the pick check below, which asks for
+    half that gap, is never decided by millimetres of the predicted pose."""
+    pick = np.linalg.inv(cross_pose) @ goal
+    deficit = floor + FLOOR_GAP - _lowest_hand_z(_approach_poses(pick))
+    if deficit <= 0.0:
+        return goal
+    # Raising the goal by h raises the pick by h * cross_pose[2, 2] (inv's z row of the rotation).
+    if cross_pose[2, 2] < 1e-6:
+        return None
+    raised = _shifted(goal, [0.0, 0.0, deficit / cross_pose[2, 2]])
+    return raised if raised[2, 3] <= top else None
 
 
 def _pick_reachable(anchor: np.ndarray, pick: np.ndarray, floor: float, clearance: float = CLEARANCE) -> bool:
     """The hand can come in along the pick's approach without touching the anchor or the floor."""
     if pick[2, 2] > MAX_UPWARD_APPROACH:
         return False
-    pre = _shifted(pick, -PREGRASP * pick[:3, 2])
-    poses = segment_poses(pre, pick)
-    lo, hi = hand_box()
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    lowest = min(float(_transform(T, corners)[:, 2].min()) for T in poses)
-    return lowest > floor + FLOOR_GAP / 2 and not poses_hit(anchor, poses, [(lo, hi)], clearance)
+    poses = _approach_poses(pick)
+    return _lowest_hand_z(poses) > floor + FLOOR_GAP / 2 and not poses_hit(anchor, poses, [hand_box()], clearance)
 
 
 def _turn_about_vertical(angle: float, point: np.ndarray) -> np.ndarray:
@@ -276,27 +305,39 @@ def plan_side_entry(object_points: np.ndarray, anchor_points: np.ndarray, cross_
     for yaw in face_yaws(goal_points):
         out = np.array([np.cos(yaw), np.sin(yaw), 0.0])
         goal = _face_tcp(goal_points, out, float(goal_points[:, 2].min()), tilt)
+        if goal is not None:
+            goal = _lift_clear_of_floor(goal, T, floor, float(goal_points[:, 2].max()) - CUP_EDGE)
         if goal is None:
             continue
         boxes = [held_box(goal_points, goal), hand_box()]
         # A cavity whose floor lies below its opening's sill (a tub) is entered higher up,
-        # then the object is lowered onto its goal.
+        # then the object is lowered onto its goal. The lowest slide clear above its staging
+        # pose is taken; failing that, the lowest overhung one.
+        overhung = None
         for rise in np.arange(0.0, MAX_INSERT_RISE + 1e-9, INSERT_RISE_STEP):
             inserted = _shifted(goal, [0.0, 0.0, lift + rise])
             if rise and poses_hit(anchor, segment_poses(inserted, _shifted(goal, [0.0, 0.0, lift])), boxes, clearance):
                 break
-            distance = _staging_distance(anchor, boxes, inserted, out, clearance)
-            if distance is not None:
-                candidates.append((distance, yaw, out, goal, boxes, lift + rise))
+            staging = _staging_distance(anchor, boxes, inserted, out, clearance)
+            if staging is None:
+                continue
+            candidate = (staging[0], yaw, out, goal, boxes, lift + rise, staging[1])
+            if not staging[1]:
+                candidates.append(candidate)
+                overhung = None
                 break
+            overhung = overhung or candidate
+        if overhung is not None:
+            candidates.append(overhung)
+    # Slides whose staging pose is clear above come first; overhung ones only fill what is left.
     if viewpoint is not None:
         toward = np.asarray(viewpoint, dtype=np.float64)[:2] - goal_points[:, :2].mean(0)
         seen_yaw = float(np.arctan2(toward[1], toward[0]))
-        candidates.sort(key=lambda c: (abs(np.angle(np.exp(1j * (c[1] - seen_yaw)))), c[0]))
+        candidates.sort(key=lambda c: (c[6], abs(np.angle(np.exp(1j * (c[1] - seen_yaw)))), c[0]))
     else:
         # Shortest slide first; ties go to the direction in the middle of the clear ones.
-        candidates.sort(key=lambda c: (c[0], abs(np.angle(np.exp(1j * (c[1] - _mean_yaw(candidates)))))))
-    for distance, _, out, goal, boxes, lift in candidates[:MAX_CANDIDATES]:
+        candidates.sort(key=lambda c: (c[6], c[0], abs(np.angle(np.exp(1j * (c[1] - _mean_yaw(candidates)))))))
+    for distance, _, out, goal, boxes, lift, _ in candidates[:MAX_CANDIDATES]:
         pick = np.linalg.inv(T) @ goal
         turn = 0.0
         if not _pick_reachable(anchor, pick, floor, clearance):
