@@ -151,7 +151,10 @@ def test_the_opening_make_targets_exist(target: str) -> None:
 
 
 def test_readme_results_table_matches_the_summaries() -> None:
-    """Each cell: the default executor's rate and interval, then the ideal executor's rate in brackets."""
+    """Each cell: the default executor's rate and interval, then the ideal executor's rate in brackets,
+    from runs carried out by today's version of the executor."""
+    from wpbench.evaluation.executor_version import older_executor_reason
+
     text = README.read_text()
     header = "| policy | open-door | place-in | open-then-place | episodes per task |"
     assert header in text, "README.md lost its results table"
@@ -163,7 +166,9 @@ def test_readme_results_table_matches_the_summaries() -> None:
         policy = cells[0].strip("`")
         counts = set()
         for task, cell in zip(("open-door", "place-in", "open-then-place"), cells[1:4]):
-            default = json.loads((runs / f"{policy}__{task}__val__procedural__camera__{DEFAULT_EXECUTOR}" / "summary.json").read_text())
+            default_run = runs / f"{policy}__{task}__val__procedural__camera__{DEFAULT_EXECUTOR}"
+            assert older_executor_reason(default_run) is None, f"README results table quotes a stale run: {older_executor_reason(default_run)}"
+            default = json.loads((default_run / "summary.json").read_text())
             ideal = json.loads((runs / f"{policy}__{task}__val__procedural__camera" / "summary.json").read_text())
             low, high = default["success_ci95"]
             expected = (f"{round(100 * default['success_rate'])}% [{round(100 * low)}, {round(100 * high)}]"

@@ -143,7 +143,9 @@ def test_resume_reports_completed_episodes_and_continues(tmp_path):
 
 @pytest.mark.parametrize("key, value", [("policy", "tp"), ("task", "open"), ("split", "test"), ("seed", 1),
                                         # retrained weights or rebuilt furniture make a different run too
-                                        ("policy_weights", ["0f1e2d3c4b5a6978"]), ("furniture_generator", 99)])
+                                        ("policy_weights", ["0f1e2d3c4b5a6978"]), ("furniture_generator", 99),
+                                        # a run.json without it was made at executor version 1
+                                        ("executor_version", 2)])
 def test_resume_refuses_a_different_run(tmp_path, key, value):
     with EpisodeWriter(tmp_path, CONFIG) as writer:
         writer.write(make_record(0))

@@ -47,11 +47,12 @@ def paper_table(
                            results=results, workers=workers if ray is not None else (workers or available_cores()),
                            use_ray=ray is not None, ray_address=ray_address(ray), executors=executor_names,
                            **ensemble)
+    from wpbench.evaluation.executor_version import OlderExecutorError
     from wpbench.evaluation.furniture_version import OtherFurnitureError
 
     try:
         path = make_paper_table(cfg, out)
-    except OtherFurnitureError as err:
+    except (OtherFurnitureError, OlderExecutorError) as err:
         typer.echo(f"Error: {err}", err=True)
         raise typer.Exit(2)
     typer.echo(path.read_text())

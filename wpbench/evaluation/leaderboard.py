@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from wpbench.evaluation.executor_version import older_executor_reason
 from wpbench.evaluation.furniture_version import other_furniture_reason
 from wpbench.evaluation.summary import SUMMARY_FILE, load_summary
 
@@ -172,7 +173,7 @@ def collect_summaries(
     root = Path(results_dir)
     rows, skipped = [], []
     for path in find_summaries(root):
-        reason = other_furniture_reason(path.parent)
+        reason = other_furniture_reason(path.parent) or older_executor_reason(path.parent)
         if reason:
             warnings.warn(f"leaving out {reason}", stacklevel=2)
             skipped.append(path)
@@ -269,10 +270,15 @@ def leaderboard_markdown(frame: "Any", skipped: list[Path] | tuple[Path, ...] = 
         "",
     ]
     other_furniture = [p for p in skipped if other_furniture_reason(p.parent)]
-    unreadable = [p for p in skipped if p not in other_furniture]
+    older_executor = [p for p in skipped if p not in other_furniture and older_executor_reason(p.parent)]
+    unreadable = [p for p in skipped if p not in other_furniture and p not in older_executor]
     if other_furniture:
         lines += ["Runs on built-in furniture of another generator version left out (move them under "
                   f"`{ARCHIVE_DIR}/` or score them again): " + ", ".join(f"`{p}`" for p in other_furniture), ""]
+    if older_executor:
+        lines += ["Runs carried out by an older version of their executor left out (score them again; "
+                  "`wpbench.evaluation.executor_version` lists what changed): "
+                  + ", ".join(f"`{p}`" for p in older_executor), ""]
     if unreadable:
         lines += ["Unreadable summaries left out: " + ", ".join(f"`{p}`" for p in unreadable), ""]
     return "\n".join(lines)

@@ -145,11 +145,15 @@ def run_dir(cfg: PaperTableConfig, policy: str, task: str, source: str = "proced
 def _read_summary(directory: Path) -> dict | None:
     import json
 
+    from wpbench.evaluation.executor_version import OlderExecutorError, older_executor_reason
     from wpbench.evaluation.furniture_version import OtherFurnitureError, other_furniture_reason
 
     reason = other_furniture_reason(directory)
     if reason:
         raise OtherFurnitureError(reason)
+    reason = older_executor_reason(directory)
+    if reason:
+        raise OlderExecutorError(reason)
     summary_file = directory / "summary.json"
     return json.loads(summary_file.read_text()) if summary_file.is_file() else None
 

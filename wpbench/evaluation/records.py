@@ -80,7 +80,7 @@ RESUME_MAY_DIFFER: frozenset[str] = frozenset(
 )
 # Run-config keys added after runs were first written: a run.json without one of them
 # was written with this value ...
-RESUME_DEFAULTS: dict[str, Any] = {"executor": "ideal", "shard": None, "camera_noise": {}}
+RESUME_DEFAULTS: dict[str, Any] = {"executor": "ideal", "shard": None, "camera_noise": {}, "executor_version": 1}
 # ... or, for these, with a value nobody knows (not compared).
 RESUME_UNKNOWN_IF_MISSING: frozenset[str] = frozenset({"assets_digest"})
 # Record keys that must equal the run config's value of the same name.

@@ -304,9 +304,10 @@ class EpisodeSession:
 
 def produced_by(cfg: RunConfig, policy) -> dict[str, Any]:
     """What decides an episode beside the run's settings: the trained weights the policy
-    loaded (their ``model_hash``es, none for ``gt`` / ``identity``) and the version of the
-    furniture generator (built-in assets only). ``run.json`` stores these, so ``--resume``
-    refuses to append episodes of retrained weights or rebuilt furniture to an old run.
+    loaded (their ``model_hash``es, none for ``gt`` / ``identity``), the version of the
+    furniture generator (built-in assets only) and the executor's version for the task
+    (wpbench.evaluation.executor_version). ``run.json`` stores these, so ``--resume`` refuses
+    to append episodes of retrained weights, rebuilt furniture or a changed executor to an old run.
     For a PartNet-Mobility folder, the content hash of the folder (``assets_digest``)
     plays the part of the generator version."""
     hashes: set[str] = set()
@@ -328,7 +329,10 @@ def produced_by(cfg: RunConfig, policy) -> dict[str, Any]:
         from wpbench.evaluation.asset_digest import folder_digest
 
         digest = folder_digest(cfg.assets)
-    return {"policy_weights": sorted(hashes), "furniture_generator": generator, "assets_digest": digest}
+    from wpbench.evaluation.executor_version import executor_version
+
+    return {"policy_weights": sorted(hashes), "furniture_generator": generator, "assets_digest": digest,
+            "executor_version": executor_version(cfg.executor, cfg.task)}
 
 
 def run_benchmark(
