@@ -13,10 +13,9 @@ reason below; the cure is to score the run again.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-from wpbench.evaluation.records import RUN_CONFIG_FILE
+from wpbench.evaluation.records import stored_run_config
 from wpbench.names import FREE, TASKS
 
 # (executor, kind of stage it touches, what changed), oldest first. Append; never edit or remove.
@@ -43,12 +42,8 @@ def executor_version(executor: str, task: str) -> int:
 def older_executor_reason(run_dir: str | Path) -> str | None:
     """One line saying why the run in ``run_dir`` was carried out by an older version of its
     executor than today's, or None when it is current or has no readable ``run.json``."""
-    path = Path(run_dir) / RUN_CONFIG_FILE
-    try:
-        stored = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    if not isinstance(stored, dict) or not isinstance(stored.get("task"), str):
+    stored = stored_run_config(run_dir)
+    if stored is None or not isinstance(stored.get("task"), str):
         return None
     executor = stored.get("executor", "ideal")
     version = stored.get("executor_version", 1)

@@ -10,10 +10,9 @@ the paper table refuses them, both with the reason below; the cure is to move th
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-from wpbench.evaluation.records import RUN_CONFIG_FILE
+from wpbench.evaluation.records import stored_run_config
 
 
 class OtherFurnitureError(ValueError):
@@ -26,12 +25,8 @@ def other_furniture_reason(run_dir: str | Path) -> str | None:
     before ``run.json`` recorded the generator are taken as they are)."""
     from wpbench.assets.procedural.generate import GENERATOR_VERSION
 
-    path = Path(run_dir) / RUN_CONFIG_FILE
-    try:
-        stored = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    if not isinstance(stored, dict) or stored.get("assets") != "procedural":
+    stored = stored_run_config(run_dir)
+    if stored is None or stored.get("assets") != "procedural":
         return None
     version = stored.get("furniture_generator")
     if version is None or version == GENERATOR_VERSION:

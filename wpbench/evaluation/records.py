@@ -87,6 +87,16 @@ RESUME_UNKNOWN_IF_MISSING: frozenset[str] = frozenset({"assets_digest"})
 RECORD_CONFIG_KEYS: tuple[str, ...] = ("policy", "task", "split", "obs")
 
 
+def stored_run_config(run_dir: str | Path) -> dict | None:
+    """The ``run.json`` in ``run_dir`` as a dict, or None when it is missing, unreadable or not an object
+    (reports that only look at it leave such runs as they are)."""
+    try:
+        stored = json.loads((Path(run_dir) / RUN_CONFIG_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return stored if isinstance(stored, dict) else None
+
+
 class RecordFormatError(ValueError):
     """An episode record or an episodes.jsonl file is malformed."""
 
