@@ -8,7 +8,9 @@ episodes). Plus the base placement rule
 flat surface in front of the opening, letting an object go higher where the arm stops
 lowering it, the pull-then-push rule on made-up boxes and doors, a held object kept off the
 arm's shoulder, more time for a piece's big joint steps, the arm checked against the door
-moved along its screw, and a door whose observed grasp point lies at the floor grasped higher."""
+moved along its screw, a door whose observed grasp point lies at the floor grasped higher, and
+a door aimed past its stop further than the arm reaches turned up to the stall angle less (one
+aimed short, or too far past, still fails)."""
 
 from __future__ import annotations
 
@@ -21,8 +23,8 @@ from wpbench import tasks  # noqa: F401
 from wpbench.sim.arm_placement import BASE_RADIUS, base_candidates, front_direction
 from wpbench.sim.door_push import WRIST_MIN_HEIGHT, handover_fraction, push_grip
 from wpbench.sim.failure import FAILURE_REASONS, PLANNING_FAILED, UNREACHABLE
-from wpbench.sim.panda_executor import FLOOR_GRASP_HEIGHT
-from executor_helpers import rotated_30, step_with
+from wpbench.sim.panda_executor import DOOR_SHORTFALLS, FLOOR_GRASP_HEIGHT
+from executor_helpers import rotated_30, step_with, turned_about_hinge
 
 
 @pytest.fixture(scope="module")
@@ -56,6 +58,19 @@ def test_gt_opens_identity_does_not(door_env, seed):
     assert len(r["arm_base"]) == 3 and r["placements_tried"] >= 1
     r = step_with(door_env, seed, lambda T: np.eye(4))
     assert not r["success"] and r["failure_reason"] == "not_open_enough"
+
+
+def test_a_door_aimed_past_its_stop_beyond_reach_is_let_go_short(door_env):
+    # Seed 12 is a fridge (stop 127 deg) the arm opens along the true turn; aimed 20 deg past the
+    # stop no base placement reaches the whole turn, so the arm turns it less and lets go.
+    r = step_with(door_env, 12, lambda T: turned_about_hinge(T, 20.0))
+    assert r["success"], (r["failure_reason"], r["failure_detail"])
+    assert r["let_go_short_deg"] in [round(float(np.degrees(c)), 1) for c in DOOR_SHORTFALLS]
+    # Aimed 25 deg short it stays short; aimed 45 deg past, the cut (at most the stall angle) is not enough.
+    r = step_with(door_env, 12, lambda T: turned_about_hinge(T, -25.0))
+    assert not r["success"] and r["failure_reason"] == "not_open_enough"
+    r = step_with(door_env, 12, lambda T: turned_about_hinge(T, 45.0))
+    assert not r["success"] and r["failure_reason"] == UNREACHABLE and "let_go_short_deg" not in r
 
 
 def test_rotated_door_fails(door_env):

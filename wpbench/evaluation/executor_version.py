@@ -16,13 +16,15 @@ from __future__ import annotations
 from pathlib import Path
 
 from wpbench.evaluation.records import stored_run_config
-from wpbench.names import FREE, TASKS
+from wpbench.names import ARTICULATED, FREE, TASKS
 
 # (executor, kind of stage it touches, what changed), oldest first. Append; never edit or remove.
 EXECUTOR_CHANGES: tuple[tuple[str, str, str], ...] = (
     ("gripper", FREE, "side entry: the cup's height solved so the pick's approach clears the floor; "
                       "slides overhung at every staging pose tried last"),
     ("panda", FREE, "the gripper's side entry, which the arm's hand follows"),
+    ("panda", ARTICULATED, "a door's turn that no base placement reaches whole is cut up to the stall angle "
+                           "short, and the hand lets go there"),
 )
 
 

@@ -15,8 +15,9 @@ has to reach them.
    along every Cartesian piece (IK seeded with the last pose; no jump, within the joint
    limits, the arm's links clear of the observed anchor cloud), and every free-space move
    is a straight joint-space line or an RRTConnect path clear of the observed clouds. The
-   first placement that works is used. None reaches the path: ``unreachable``; the poses
-   are reached but no collision-free move or chain exists: ``planning_failed``.
+   first placement that works is used. A door's turn no placement reaches whole is cut up to
+   the stall angle short, and the hand lets go there. None reaches the path: ``unreachable``;
+   the poses are reached but no collision-free move or chain exists: ``planning_failed``.
 3. Execution: the base is placed, the arm starts at its rest pose, and its joint targets
    (pd_joint_pos, velocity feed-forward) follow the planned joint path at the gripper's
    speeds (minimum-jerk timing); grasps, the joint's release and the settle are the
@@ -75,6 +76,10 @@ MIN_GRASP_HEIGHT = 0.5       # ... and then no lower than this ...
 MIN_LOW_POINTS = 20          # ... when it shows at least this many points in between
 FLOOR_GRASP_HEIGHT = 0.12    # m, a door point lower than this is grasped only when the door shows no such band above it
 HINGE_REACHES = (0.45, 0.3)  # m, a door no placement reaches along its whole arc is grasped this near its hinge (in turn)
+# rad, a door whose whole predicted turn the arm reaches from no placement is turned this much less (in turn) and let go
+# there: at most STALL_ANGLE, the shortfall every executor already accepts of a door stopped against its stop.
+DOOR_SHORTFALLS = (STALL_ANGLE / 2, STALL_ANGLE)
+MIN_DOOR_TURN_LEFT = np.radians(30.0)   # rad, a door is turned at least this far when its turn is shortened
 PUSH_RETREAT = 0.12          # m, the hand backs off this far from a door it pulled before it pushes
 PULL_HOLD = 0.3             # s, the hand holds a pulled door still this long before it lets go of it
 PUSH_DOOR_LAG = 0.08         # rad, the move to a push keeps clear of the door up to this far behind its plan
@@ -728,27 +733,49 @@ def _rolled_grasp(grasp: Grasp, roll: float) -> Grasp:
 def execute_articulated_panda(scene: ArmScene, action_points: np.ndarray, anchor_points: np.ndarray,
                               cross_pose: np.ndarray, free_joint: Callable[[], None],
                               hold_joint: Callable[[], None]) -> ExecutionResult:
-    """Grasp the door or drawer as the gripper does, move it along the predicted screw, release, settle."""
+    """Grasp the door or drawer as the gripper does, move it along the predicted screw, release,
+    settle. When no grasp reaches the whole turn (``unreachable``), the turn cut DOOR_SHORTFALLS
+    short, the first that plans, and the hand lets go there (``let_go_short_deg`` in the result):
+    a door aimed past its stop is held by the stop whatever the hand does beyond it, and a door
+    aimed short ends shorter still, so a cut does not rescue it. When no cut plans, the full
+    turn's failure."""
     suction = scene.grasp_mode == "suction"
-    if suction:
-        # First a cup grasp clear of protrusions (a handle); when no placement plans it and
-        # it differs from the gripper's choice, that choice.
-        plan, failed, extra = _door_attempt(scene, _clear_suction(action_points), action_points, anchor_points,
-                                            cross_pose, suction)
-        if plan is None and extra.get("grasp_clear_of_handle"):
-            plan2, failed2, extra2 = _door_attempt(scene, suction_point, action_points, anchor_points,
-                                                   cross_pose, suction)
-            extra2["placements_tried"] = extra2.get("placements_tried", 0) + extra.get("placements_tried", 0)
-            if plan2 is not None:
-                plan, failed, extra = plan2, failed2, extra2
-    else:
-        plan, failed, extra = _door_attempt(scene, articulated_grasp, action_points, anchor_points, cross_pose,
-                                            suction)
+    plan, failed, extra = _door_grasps(scene, action_points, anchor_points, cross_pose, suction)
+    screw = screw_of(cross_pose)
+    tried = extra.get("placements_tried", 0)
+    for cut in DOOR_SHORTFALLS:
+        if plan is not None or failed is None or failed.reason != UNREACHABLE or screw.angle - cut < MIN_DOOR_TURN_LEFT:
+            break
+        shorter = interpolate(cross_pose, 1.0 - cut / screw.angle)
+        plan2, _, extra2 = _door_grasps(scene, action_points, anchor_points, shorter, suction)
+        tried += extra2.get("placements_tried", 0)
+        if plan2 is not None:
+            plan, extra = plan2, {**extra2, "let_go_short_deg": round(float(np.degrees(cut)), 1)}
+    extra["placements_tried"] = tried
     if plan is None:
         if failed is None:   # the prediction moves nothing: the arm has nothing to do
             return _finish(None, _settle(scene), extra)
         return _finish(None, failed, extra)
     return _carry_out(scene, plan, SYMMETRIC_ROLLS, extra, STALLED_AGAINST_HINGE, free_joint, hold_joint)
+
+
+def _door_grasps(scene: ArmScene, action_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray,
+                 suction: bool) -> tuple[Plan | None, ExecutionResult | None, dict]:
+    """The door's grasps in turn, planned along ``cross_pose``: (plan or None, the failure or None
+    when the prediction moves nothing, what the result records)."""
+    if not suction:
+        return _door_attempt(scene, articulated_grasp, action_points, anchor_points, cross_pose, suction)
+    # First a cup grasp clear of protrusions (a handle); when no placement plans it and
+    # it differs from the gripper's choice, that choice.
+    plan, failed, extra = _door_attempt(scene, _clear_suction(action_points), action_points, anchor_points,
+                                        cross_pose, suction)
+    if plan is None and extra.get("grasp_clear_of_handle"):
+        plan2, failed2, extra2 = _door_attempt(scene, suction_point, action_points, anchor_points,
+                                               cross_pose, suction)
+        extra2["placements_tried"] = extra2.get("placements_tried", 0) + extra.get("placements_tried", 0)
+        if plan2 is not None:
+            plan, failed, extra = plan2, failed2, extra2
+    return plan, failed, extra
 
 
 def _door_attempt(scene: ArmScene, choose: Callable, action_points: np.ndarray, anchor_points: np.ndarray,
