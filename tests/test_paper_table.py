@@ -96,6 +96,35 @@ def test_real_object_runs_get_their_own_section_only_when_there_are_some():
     assert "| gf | ideal | 90% [80, 95] (n=100) | not run | not run |" in lines[:start]
 
 
+def test_real_object_runs_are_counted_per_object(tmp_path: Path):
+    import json
+
+    from wpbench.evaluation.paper_table import real_per_object, run_dir
+
+    cfg = PaperTableConfig(policies=("gf", "wp-postsvd-t"), results=tmp_path)
+    folder = run_dir(cfg, "wp-postsvd-t", "open-door", "partnet-mobility")
+    folder.mkdir(parents=True)
+    (folder / "summary.json").write_text(json.dumps({"success_rate": 0.5}))
+    outcomes = [("45213", "storage", True), ("45213", "storage", False), ("7128", "oven", True),
+                ("45213", "storage", False), ("7128", "oven", True)]
+    (folder / "episodes.jsonl").write_text("".join(
+        json.dumps({"episode": i, "seed": i, "object_id": o, "category": c, "success": ok}) + "\n"
+        for i, (o, c, ok) in enumerate(outcomes)))
+    counts = real_per_object(cfg, "wp-postsvd-t", "open-door")
+    assert counts == {"45213": ("storage", 1, 3), "7128": ("oven", 2, 2)}
+    assert real_per_object(cfg, "wp-postsvd-t", "place-in") is None
+    text = render(cfg, {}, {}, real_per_object={("wp-postsvd-t", "ideal", "open-door"): counts,
+                                                ("wp-postsvd-t", "gripper", "place-in"): {"7128": ("oven", 0, 4)}})
+    lines = text.splitlines()
+    start = lines.index("## Real PartNet-Mobility objects, per object")
+    section = lines[start:]
+    assert "| policy | executor | 7128 (oven) | 45213 (storage) |" in section
+    assert "| wp-postsvd-t | ideal | 2/2 · - · - | 1/3 · - · - |" in section
+    assert "| wp-postsvd-t | gripper | - · 0/4 · - | - · - · - |" in section
+    assert not any(line.startswith("| gf |") for line in section)
+    assert "per object" not in render(cfg, {}, {})
+
+
 def test_test_split_runs_stand_beside_val_and_the_camera_settings_are_named():
     cfg = PaperTableConfig(policies=("wp-postsvd",))
     val = {("wp-postsvd", "ideal", "open-door"): {"success_rate": 0.9, "success_ci95": [0.8, 0.95], "episodes": 100,

@@ -18,7 +18,8 @@ Four tables, one command (``wpbench paper-table``):
 4. The same on the test split and on the real PartNet-Mobility objects, where those runs
    exist (``...__test__procedural__<obs>``, scored once per release by an explicit sweep;
    ``...__val__partnet-mobility__<obs>``, made by ``scripts/reference_runs.sh``: how far
-   policies trained on the built-in furniture carry to furniture they never saw).
+   policies trained on the built-in furniture carry to furniture they never saw), and the
+   real-object runs' successes per object.
 """
 
 from __future__ import annotations
@@ -163,6 +164,46 @@ def real_success(cfg: PaperTableConfig, policy: str, task: str, executor: str = 
     return _read_summary(run_dir(cfg, policy, task, REAL_SOURCE, executor=executor))
 
 
+def real_per_object(cfg: PaperTableConfig, policy: str, task: str, executor: str = "ideal") -> dict | None:
+    """The real-object run's successes per object, ``{object_id: (category, successes, episodes)}``,
+    or None when it was never run (read from its ``episodes.jsonl``)."""
+    from wpbench.evaluation.records import read_episodes
+
+    directory = run_dir(cfg, policy, task, REAL_SOURCE, executor=executor)
+    if _read_summary(directory) is None:
+        return None
+    counts: dict[str, tuple[str, int, int]] = {}
+    for record in read_episodes(directory):
+        name = str(record.get("object_id"))
+        category, wins, n = counts.get(name, (str(record.get("category")), 0, 0))
+        counts[name] = (category, wins + bool(record.get("success")), n + 1)
+    return counts
+
+
+def _per_object_table(cfg: PaperTableConfig, per_object: dict) -> list[str]:
+    """``per_object``: {(policy, executor, task): {object_id: (category, successes, episodes)}}.
+    A row per policy and executor with real-object runs, a column per object; a cell gives the
+    successes / episodes of each task in TASKS order ("-" where that task was not run)."""
+    objects = sorted({(cat, name) for counts in per_object.values() for name, (cat, _, _) in counts.items()})
+    lines = ["", "## Real PartNet-Mobility objects, per object",
+             "", "Successes / episodes on each object, " + " · ".join(TASKS) + ".", "",
+             "| policy | executor | " + " | ".join(f"{name} ({cat})" for cat, name in objects) + " |",
+             "|" + "---|" * (2 + len(objects))]
+    for policy in cfg.policies:
+        for executor in EXECUTORS:
+            if not any((policy, executor, task) in per_object for task in TASKS):
+                continue
+            cells = []
+            for _, name in objects:
+                parts = []
+                for task in TASKS:
+                    got = per_object.get((policy, executor, task), {}).get(name)
+                    parts.append("-" if got is None else f"{got[1]}/{got[2]}")
+                cells.append(" · ".join(parts))
+            lines.append(f"| {policy} | {executor} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def test_success(cfg: PaperTableConfig, policy: str, task: str, executor: str = "ideal") -> dict | None:
     """The run's summary on the test split, or None. Never run from here: test is scored once
     per release of the weights, by an explicit sweep, after every choice is made (docs/design.md)."""
@@ -235,11 +276,12 @@ def _success_table(cfg: PaperTableConfig, title: str, successes: dict) -> list[s
 
 def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: dict | None = None,
            real_successes: dict | None = None, test_successes: dict | None = None,
-           trained_on: dict | None = None) -> str:
+           trained_on: dict | None = None, real_per_object: dict | None = None) -> str:
     """``successes`` / ``real_successes`` / ``test_successes``: {(policy, executor, task): summary}
     on the built-in val furniture / the real objects / the built-in test furniture (those two
     sections only when there is at least one such run). ``trained_on``: {policy: what its
-    weights were trained on} (a section of its own when given)."""
+    weights were trained on} (a section of its own when given). ``real_per_object``: the real
+    runs' successes per object (see :func:`_per_object_table`; a section when given)."""
     by_category = by_category or {}
     test_successes = test_successes or {}
     seen = [*successes.values(), *(real_successes or {}).values(), *test_successes.values()]
@@ -290,6 +332,8 @@ def render(cfg: PaperTableConfig, errors: dict, successes: dict, by_category: di
     if real_successes:
         lines += _success_table(cfg, f"## Simulated success rate on real PartNet-Mobility objects ({cfg.obs}; "
                                      "trained on built-in furniture only)", real_successes)
+    if real_per_object:
+        lines += _per_object_table(cfg, real_per_object)
     return "\n".join(lines) + "\n"
 
 
@@ -306,6 +350,7 @@ def _refuse_runs_on_other_furniture(cfg: PaperTableConfig) -> None:
 def make_paper_table(cfg: PaperTableConfig, out: Path | None = None) -> Path:
     _refuse_runs_on_other_furniture(cfg)
     errors, successes, by_category, real_successes, test_successes, trained_on = {}, {}, {}, {}, {}, {}
+    per_object = {}
     for policy in cfg.policies:
         try:
             errors[policy] = pose_errors(cfg, policy)
@@ -323,7 +368,11 @@ def make_paper_table(cfg: PaperTableConfig, out: Path | None = None) -> Path:
                     summary = read(cfg, policy, task, executor)
                     if summary is not None:
                         found[(policy, executor, task)] = summary
+                counts = real_per_object(cfg, policy, task, executor)
+                if counts is not None:
+                    per_object[(policy, executor, task)] = counts
     out = Path(out) if out is not None else Path(cfg.results) / "paper-table.md"
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(render(cfg, errors, successes, by_category, real_successes, test_successes, trained_on))
+    out.write_text(render(cfg, errors, successes, by_category, real_successes, test_successes, trained_on,
+                          per_object))
     return out
