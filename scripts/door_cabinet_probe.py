@@ -4,7 +4,8 @@ The built-in storage category is half chests of drawers, and its door cabinets s
 ``StorageRanges``. This writes door cabinets alone, optionally narrowed to one corner of those
 ranges (for example a small single door, the size of a safe's), from a library seed other than the
 benchmark's (0), so none is a val or test instance. Every object is put in the ``val`` split of the
-probe folder, which is what `wpbench run --assets DIR` scores by default.
+probe folder, which is what `wpbench run --assets DIR` scores by default; ``--split train`` puts them
+in ``train`` instead, for `wpbench data generate --assets DIR --split train`.
 
     python scripts/door_cabinet_probe.py --out runs/probe/small --width 0.50 0.58 --height 0.65 0.75
     wpbench run --policy wp --task open-door --assets runs/probe/small --episodes 18 --executor ideal
@@ -29,6 +30,8 @@ def main() -> None:
     parser.add_argument("--width", type=float, nargs=2, help="carcass width range, m")
     parser.add_argument("--height", type=float, nargs=2, help="carcass height range above the base, m")
     parser.add_argument("--base", type=float, nargs=2, help="plinth and leg height range, m")
+    parser.add_argument("--split", choices=("val", "train"), default="val",
+                        help="split to put every cabinet in: val to score them, train to generate training data from them")
     args = parser.parse_args()
     if args.seed == 0:
         parser.error("--seed 0 draws the benchmark's own instances; choose another seed")
@@ -45,9 +48,11 @@ def main() -> None:
 
     # generate_object builds through the BUILDERS table; point storage at door cabinets of these ranges.
     library.BUILDERS["storage"] = lambda rng, object_id: storage.build_door_cabinet(rng, object_id, ranges)
-    ids = [library.generate_object("storage", index, args.out, seed=args.seed, split="val").object_id
+    ids = [library.generate_object("storage", index, args.out, seed=args.seed, split=args.split).object_id
            for index in range(args.count)]
-    (args.out / "split.json").write_text(json.dumps({"train": [], "val": ids, "test": []}, indent=2) + "\n")
+    splits = {"train": [], "val": [], "test": []}
+    splits[args.split] = ids
+    (args.out / "split.json").write_text(json.dumps(splits, indent=2) + "\n")
     print(f"wrote {len(ids)} door cabinets to {args.out}")
 
 
