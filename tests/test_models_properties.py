@@ -220,3 +220,36 @@ def test_goal_flow_in_the_action_panel_heading_is_yaw_equivariant(yaw):
     model = build_model("goalflow", **small_overrides("goalflow", heading_source="action_panel")).double().eval()
     torch.nn.init.normal_(model.flow_head[-1].weight, std=0.1)
     _assert_yaw_equivariant(model, yaw)
+
+
+def _tax_pose_seeing_heights():
+    from models_helpers import small_overrides
+
+    torch.manual_seed(0)
+    return build_model("taxpose", **small_overrides("taxpose", absolute_height=True)).double().eval()
+
+
+@settings(max_examples=5, deadline=None)
+@given(shift=st.tuples(st.floats(-3.0, 3.0), st.floats(-3.0, 3.0)), yaw=st.floats(-math.pi, math.pi))
+def test_tax_pose_seeing_heights_stays_equivariant_on_the_floor(shift, yaw):
+    """With ``absolute_height`` a horizontal move and a yaw of the scene still move the answer with it."""
+    model = _tax_pose_seeing_heights()
+    data = scene(batch=1, dtype=torch.float64)
+    t = torch.tensor([shift[0], shift[1], 0.0], dtype=torch.float64)
+    with torch.no_grad():
+        T = model(data["action"], data["anchor"]).transform
+        T_moved = model(data["action"] + t, data["anchor"] + t).transform
+    assert torch.allclose(se3.apply(T_moved, data["action"] + t), se3.apply(T, data["action"]) + t, atol=1e-8)
+    _assert_yaw_equivariant(model, yaw)
+
+
+def test_tax_pose_seeing_heights_answers_a_lifted_scene_differently():
+    """Lifting the whole scene 30 cm is a different scene for it; without the option it only lifts the answer."""
+    data = scene(batch=1, dtype=torch.float64)
+    lift = torch.tensor([0.0, 0.0, 0.3], dtype=torch.float64)
+    for model, follows in ((_tax_pose_seeing_heights(), False), (small_model("taxpose"), True)):
+        with torch.no_grad():
+            T = model(data["action"], data["anchor"]).transform
+            T_lifted = model(data["action"] + lift, data["anchor"] + lift).transform
+        moved_with = torch.allclose(se3.apply(T_lifted, data["action"] + lift), se3.apply(T, data["action"]) + lift, atol=1e-6)
+        assert moved_with == follows

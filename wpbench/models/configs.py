@@ -78,6 +78,12 @@ class TaxPoseConfig:
         (``wpbench.models.heading_frame``): exact yaw equivariance.
     learn_sharpness: learn a factor on the correspondence scores (softmax
         temperature), so the soft correspondences can sharpen quickly.
+    absolute_height: centre each cloud only horizontally before its encoder, so
+        the features see heights above the floor (z = 0): which shelf of a
+        cabinet the block goes on depends on its height above the floor, which a
+        cloud centred on its own centroid shows only through the furniture's
+        lowest points. Equivariance to horizontal translation and yaw is kept;
+        a vertical shift of the whole scene is no longer one the model ignores.
     """
 
     encoder: DGCNNConfig = field(default_factory=DGCNNConfig)
@@ -87,6 +93,7 @@ class TaxPoseConfig:
     head_hidden: int = 64
     heading_frame: bool = True
     learn_sharpness: bool = True
+    absolute_height: bool = False
 
     def __post_init__(self) -> None:
         if self.encoder.emb_dim % self.attention_heads:

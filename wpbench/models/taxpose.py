@@ -66,9 +66,17 @@ class TaxPose(nn.Module):
             terms[key] = from_heading_frame(rotation, terms[key])
         return terms
 
+    def _encoder_centre(self, points: torch.Tensor) -> torch.Tensor:
+        """(B, 1, 3): the centroid the encoder input is taken relative to; with
+        ``absolute_height`` its height is 0, so heights above the floor stay in the input."""
+        centre = points.mean(dim=1, keepdim=True)
+        if self.config.absolute_height:
+            centre = centre * centre.new_tensor([1.0, 1.0, 0.0])
+        return centre
+
     def _correspondence_terms_in_frame(self, action: torch.Tensor, anchor: torch.Tensor) -> dict[str, torch.Tensor]:
-        action_features = self.action_encoder(action - action.mean(dim=1, keepdim=True))
-        anchor_features = self.anchor_encoder(anchor - anchor.mean(dim=1, keepdim=True))
+        action_features = self.action_encoder(action - self._encoder_centre(action))
+        anchor_features = self.anchor_encoder(anchor - self._encoder_centre(anchor))
         action_features, anchor_features = self.cross_attention(action_features, anchor_features)
 
         scores = action_features @ anchor_features.transpose(1, 2) / math.sqrt(action_features.shape[-1])
