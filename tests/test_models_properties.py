@@ -105,6 +105,16 @@ def test_yaw_equivariance(name, yaw):
     _assert_yaw_equivariant(small_model(name), yaw)
 
 
+def _assert_translation_equivariant(model: torch.nn.Module, shift) -> None:
+    """Moving both clouds by ``shift`` moves the predicted goal of the action by it."""
+    data = scene(batch=1, dtype=torch.float64)
+    t = torch.tensor(shift, dtype=torch.float64)
+    with torch.no_grad():
+        T = model(data["action"], data["anchor"]).transform
+        T_moved = model(data["action"] + t, data["anchor"] + t).transform
+    assert torch.allclose(se3.apply(T_moved, data["action"] + t), se3.apply(T, data["action"]) + t, atol=1e-8)
+
+
 def _assert_yaw_equivariant(model: torch.nn.Module, yaw: float) -> None:
     data = scene(batch=1, dtype=torch.float64)
     A = yaw_rotations(torch.tensor([yaw], dtype=torch.float64))
@@ -190,12 +200,7 @@ def _goal_flow_reading_the_anchor_extent() -> torch.nn.Module:
 @given(shift=st.tuples(*[st.floats(-3.0, 3.0)] * 3), yaw=st.floats(-math.pi, math.pi))
 def test_goal_flow_with_the_anchor_extent_stays_equivariant(shift, yaw):
     model = _goal_flow_reading_the_anchor_extent()
-    data = scene(batch=1, dtype=torch.float64)
-    t = torch.tensor(shift, dtype=torch.float64)
-    with torch.no_grad():
-        T = model(data["action"], data["anchor"]).transform
-        T_moved = model(data["action"] + t, data["anchor"] + t).transform
-    assert torch.allclose(se3.apply(T_moved, data["action"] + t), se3.apply(T, data["action"]) + t, atol=1e-8)
+    _assert_translation_equivariant(model, shift)
     _assert_yaw_equivariant(model, yaw)
 
 
@@ -234,12 +239,7 @@ def _tax_pose_seeing_heights():
 def test_tax_pose_seeing_heights_stays_equivariant_on_the_floor(shift, yaw):
     """With ``absolute_height`` a horizontal move and a yaw of the scene still move the answer with it."""
     model = _tax_pose_seeing_heights()
-    data = scene(batch=1, dtype=torch.float64)
-    t = torch.tensor([shift[0], shift[1], 0.0], dtype=torch.float64)
-    with torch.no_grad():
-        T = model(data["action"], data["anchor"]).transform
-        T_moved = model(data["action"] + t, data["anchor"] + t).transform
-    assert torch.allclose(se3.apply(T_moved, data["action"] + t), se3.apply(T, data["action"]) + t, atol=1e-8)
+    _assert_translation_equivariant(model, (shift[0], shift[1], 0.0))
     _assert_yaw_equivariant(model, yaw)
 
 
