@@ -2,7 +2,7 @@
 
 The network runs in the heading frame (``heading_frame``), so its
 correspondences are exactly yaw-equivariant. Per object a DGCNN embeds the cloud centred on its own centroid (so features
-are translation invariant); cross-attention lets each object's points read
+are translation invariant; with ``absolute_height`` centred only horizontally); cross-attention lets each object's points read
 the other's. Scores ``s_ij = <phi_i, psi_j> / sqrt(D)`` give
 
 - for each action point a target ``v_i = sum_j softmax_j(s_ij) q_j + r_i``,
