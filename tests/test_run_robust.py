@@ -334,8 +334,11 @@ def test_peak_memory_in_the_summary_is_what_usr_bin_time_measures(wpbench_exe, t
     assert result.returncode == 0, result.stderr
     measured_mib = int(result.stderr.strip().splitlines()[-1].split()[1]) / 1024
     reported_mib = json.loads((out / "summary.json").read_text())["timings"]["run"]["peak_rss_mib"]
-    # What the command does after writing the summary (printing its table) may add a little.
-    assert measured_mib - 16 <= reported_mib <= measured_mib, (reported_mib, measured_mib)
+    # What the process does after writing the summary adds a little that no summary can hold: printing its
+    # table, and above all the interpreter's shutdown, where the native libraries are torn down after every
+    # atexit hook (15-17 MiB on a 2-core CI machine, measured as ru_maxrss at atexit against /usr/bin/time).
+    # A summary that missed the workers or the policy would be off by hundreds of MiB.
+    assert measured_mib - 32 <= reported_mib <= measured_mib, (reported_mib, measured_mib)
 
 
 def test_resume_refuses_another_executor_and_reads_old_runs_as_ideal(tmp_path):
