@@ -13,10 +13,12 @@ resumed, so the script can be stopped and started again. results/runs itself is 
 from __future__ import annotations
 
 import argparse
-import json
 import subprocess
 import sys
 from pathlib import Path
+
+from wpbench.evaluation.records import EPISODES_FILE, stored_run_config
+from wpbench.evaluation.summary import SUMMARY_FILE
 
 EXECUTOR_ORDER = {"ideal": 0, "gripper": 1, "panda": 2}
 
@@ -35,8 +37,8 @@ def run_command(settings: dict, out: Path, weights_root: Path | None, workers: i
 
 
 def is_complete(folder: Path, episodes: int) -> bool:
-    records = folder / "episodes.jsonl"
-    if not (folder / "summary.json").exists() or not records.exists():
+    records = folder / EPISODES_FILE
+    if not (folder / SUMMARY_FILE).exists() or not records.exists():
         return False
     with records.open() as handle:
         return sum(1 for _ in handle) == episodes
@@ -58,11 +60,11 @@ def main() -> None:
     suffixes = tuple(args.only.split(",")) if args.only else None
     chosen = []
     for folder in sorted(args.runs.iterdir()):
-        if folder.name.split("__")[0] not in args.policies or not (folder / "run.json").exists():
+        if folder.name.split("__")[0] not in args.policies or (suffixes and not folder.name.endswith(suffixes)):
             continue
-        if suffixes and not folder.name.endswith(suffixes):
-            continue
-        chosen.append((json.loads((folder / "run.json").read_text()), folder.name))
+        settings = stored_run_config(folder)
+        if settings is not None:
+            chosen.append((settings, folder.name))
     if not chosen:
         parser.error(f"no run of {', '.join(args.policies)} in {args.runs} matches")
     chosen.sort(key=lambda item: (EXECUTOR_ORDER.get(item[0]["executor"], 9), item[1]))
