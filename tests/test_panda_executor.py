@@ -6,7 +6,8 @@ side entry no single base reaches is relayed, and one is slid into a low deep ca
 episodes). Plus the base placement rule
 (beside a door lying in front, within the arm's reach), the relay spots on the floor and on a
 flat surface in front of the opening, letting an object go higher where the arm stops
-lowering it, the pull-then-push rule on made-up boxes and doors, a held object kept off the
+lowering it or short where the forearm stops its slide (a fridge's block still in, one aimed
+10 cm too deep still out), the pull-then-push rule on made-up boxes and doors, a held object kept off the
 arm's shoulder, more time for a piece's big joint steps, the arm checked against the door
 moved along its screw, a door whose observed grasp point lies at the floor grasped higher, and
 a door aimed past its stop further than the arm reaches turned up to the stall angle less (one
@@ -306,6 +307,46 @@ def test_an_object_let_go_higher_where_the_arm_stops_lowering():
     long = _line(pose(0.3), pose(0.3 - RELEASE_DROP - 0.05))
     long.release_early = RELEASE_DROP
     assert _let_go_earlier([script[0], slide, long, ReleaseStep(), retreat], 1, 5, slide.samples + 1) is None
+
+
+def test_an_object_let_go_short_where_the_forearm_stops_the_slide():
+    from wpbench.sim.panda_executor import SLIDE_SHORT, Move, ReleaseStep, _let_go_earlier, _line
+
+    def pose(x, z=0.3):
+        T = np.eye(4)
+        T[:3, 3] = [x, 0.0, z]
+        return T
+
+    approach, slide, lower = _line(pose(0.9, 0.5), pose(0.8)), _line(pose(0.8), pose(0.5)), _line(pose(0.5), pose(0.5, 0.27))
+    slide.release_early = SLIDE_SHORT
+    retreat = _line(pose(0.5, 0.27), pose(0.8), check_stall=False)
+    script = [Move(pose(0.9, 0.5), np.zeros((1, 3))), approach, slide, lower, ReleaseStep(), retreat]
+    # The chain stopped 5 cm before the slide's end: the object is let go where the slide now
+    # ends (the lowering is left out), and the hand backs off from there to the same pose.
+    stop = int(np.argmin(np.abs(slide.sampled[:, 0, 3] - 0.55)))
+    cut = _let_go_earlier(script, 1, len(script), approach.samples + stop)
+    assert cut is not None and [type(s).__name__ for s in cut] == ["Move", "Path", "Path", "ReleaseStep", "Path"]
+    assert np.allclose(cut[2].sampled[-1], slide.sampled[stop - 1])
+    assert np.allclose(cut[4].sampled[0], slide.sampled[stop - 1]) and np.allclose(cut[4].sampled[-1], pose(0.8))
+    # Stopped further from the end than SLIDE_SHORT: no.
+    far = int(np.argmin(np.abs(slide.sampled[:, 0, 3] - (0.5 + SLIDE_SHORT + 0.03))))
+    assert _let_go_earlier(script, 1, len(script), approach.samples + far) is None
+    # No release after the slide within the chain: no.
+    assert _let_go_earlier(script[:4], 1, 4, approach.samples + stop) is None
+
+
+def test_a_block_slid_into_a_fridge_is_let_go_short_of_the_forearm_and_one_too_deep_fails(place_camera_env):
+    # Episode 17: a fridge; along the slide into its cavity the forearm meets the furniture
+    # 4-6 cm before the slide's end from every base and relay spot. Let go there, the block
+    # still comes to rest inside. The same goal 10 cm further in (into the back wall) fails.
+    r = step_with(place_camera_env, 17, lambda T: T)
+    assert r["success"], (r["failure_reason"], r["failure_detail"])
+    assert r["entry"] == "side"
+    stage, inserted = np.array(r["planned_path"][-3]), np.array(r["planned_path"][-2])
+    out = (stage - inserted) / np.linalg.norm(stage - inserted)
+    deeper = np.eye(4)
+    deeper[:3, 3] = -0.10 * out
+    assert not step_with(place_camera_env, 17, lambda T: deeper @ T)["success"]
 
 
 def test_a_held_object_keeps_off_the_arm_shoulder():

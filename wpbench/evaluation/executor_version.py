@@ -25,6 +25,7 @@ EXECUTOR_CHANGES: tuple[tuple[str, str, str], ...] = (
     ("panda", FREE, "the gripper's side entry, which the arm's hand follows"),
     ("panda", ARTICULATED, "a door's turn that no base placement reaches whole is cut up to the stall angle "
                            "short, and the hand lets go there"),
+    ("panda", FREE, "a slide into a cavity that the forearm cannot finish is let go up to 8 cm short of its end"),
 )
 
 

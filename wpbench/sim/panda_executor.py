@@ -99,6 +99,7 @@ SUPPORT_REACH = 0.35         # m, around a relayed object its support is the han
 SUPPORT_GAP = 0.002          # m, set down this far above the highest of them
 MIN_CUP_RAISE = 0.01         # m, a cup raised less than this up the face is not tried separately
 RELEASE_DROP = 0.06          # m, an object slid into a cavity may be let go at most this high above its goal
+SLIDE_SHORT = 0.08           # m, ... or, where the forearm meets the furniture, this far short of the slide's end
 RELAY_PRESS = 0.02           # m, the cup on a relayed object presses this much further
 PIECE_JOINT_STEP = 0.04      # rad, a Cartesian piece's samples further apart in a joint than this get more time
 SHOULDER_RADIUS = 0.13       # m, a held object keeps out of this vertical cylinder about the base's axis ...
@@ -459,8 +460,9 @@ def _arm_meets_door(planner: ArmPlanner, steps: list, chain: np.ndarray) -> dict
 def _let_go_earlier(script: list, first: int, end: int, failed_at: int) -> list | None:
     """``script`` with the piece among ``script[first:end]`` in which the chain failed at pose
     ``failed_at`` cut at the pose before, when that piece may end early (``release_early``) by
-    what is left of it, and the retreat after the release that follows it starting where the
-    cut piece now ends; None when it may not."""
+    what is left of it; the pieces between it and the release that follows are left out (the
+    object is let go where the cut piece now ends) and the retreat after the release starts
+    there. None when it may not, or when no release follows before ``end``."""
     start = 0
     for n in range(first, end):
         piece = script[n]
@@ -478,11 +480,17 @@ def _let_go_earlier(script: list, first: int, end: int, failed_at: int) -> list 
                 out[n] = _line(piece.sampled[0], end_pose, piece.check_stall)
             else:
                 out[n] = None
+            released = False
             for m in range(n + 1, end):
-                if isinstance(out[m], Path):
-                    if isinstance(out[m - 1], ReleaseStep):
+                if isinstance(out[m], ReleaseStep):
+                    released = True
+                elif isinstance(out[m], Path):
+                    if released:
                         out[m] = _line(end_pose, out[m].sampled[-1], check_stall=False)
-                    break
+                        break
+                    out[m] = None
+            if not released:
+                return None
             return [x for x in out if x is not None]
         start += piece.samples
     return None
@@ -939,6 +947,9 @@ def _side_scripts(plan, object_points: np.ndarray, anchor_points: np.ndarray,
         # The last piece lowers the object onto its goal after the slide (into a cavity whose floor
         # lies below its sill): where the wrist, still over the sill, stops it, the object is let go higher.
         script[-1].release_early = RELEASE_DROP
+        # The slide before it: where the forearm meets the furniture near its end, the object is let
+        # go there, nearer the opening than predicted; the goal region still decides the episode.
+        script[-2].release_early = SLIDE_SHORT
         script += _retreat(way[-1], plan.goal[:3, 2], plan.retreat())
         scripts.append(script)
     return scripts, extra
