@@ -923,9 +923,10 @@ def _turn_script(object_points: np.ndarray, anchor: np.ndarray, turn: float, rol
 
 
 def _side_scripts(plan, object_points: np.ndarray, anchor_points: np.ndarray,
-                  press: float = SUCTION_PRESS, slow: bool = False) -> tuple[list[list], dict]:
+                  press: float = SUCTION_PRESS, slow: bool = False, short: bool = False) -> tuple[list[list], dict]:
     """The side-entry plan as scripts (one per TCP roll; the cup ``press`` past the face, slowly
-    with ``slow``), and what the stage result records of it."""
+    with ``slow``; the slide may end up to SLIDE_SHORT early with ``short``), and what the stage
+    result records of it."""
     from wpbench.sim.side_entry import _turn_about_vertical, regrasp_centre
 
     waypoints = plan.carry_waypoints()
@@ -947,9 +948,9 @@ def _side_scripts(plan, object_points: np.ndarray, anchor_points: np.ndarray,
         # The last piece lowers the object onto its goal after the slide (into a cavity whose floor
         # lies below its sill): where the wrist, still over the sill, stops it, the object is let go higher.
         script[-1].release_early = RELEASE_DROP
-        # The slide before it: where the forearm meets the furniture near its end, the object is let
-        # go there, nearer the opening than predicted; the goal region still decides the episode.
-        script[-2].release_early = SLIDE_SHORT
+        # The slide before it, when allowed: where the forearm meets the furniture near its end, the
+        # object is let go there, nearer the opening than predicted; the goal region still decides.
+        script[-2].release_early = SLIDE_SHORT if short else 0.0
         script += _retreat(way[-1], plan.goal[:3, 2], plan.retreat())
         scripts.append(script)
     return scripts, extra
@@ -1115,9 +1116,10 @@ def _support_floor(anchor_points: np.ndarray, around: np.ndarray) -> np.ndarray:
 
 
 def _entries(object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray,
-             viewpoint: np.ndarray | None, relayed: bool) -> list:
+             viewpoint: np.ndarray | None, relayed: bool, short: bool = False) -> list:
     """The ways into a roofed cavity: [(plan, scripts, rolls, extra)] for the cup on the side face
-    that looks out at the goal (wpbench.sim.side_entry); empty when there is none."""
+    that looks out at the goal (wpbench.sim.side_entry), their slides let go short with ``short``;
+    empty when there is none."""
     out = []
     side = plan_side_entry(object_points, anchor_points, cross_pose, viewpoint)
     if side is not None and not _below_floor(np.stack(side.carry_waypoints())):
@@ -1128,7 +1130,7 @@ def _entries(object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: n
         # the floor (or the surface) the object stands on.
         for plan in (_raised_cup(side, object_points, anchor_points, cross_pose), side):
             if plan is not None:
-                scripts, extra = _side_scripts(plan, object_points, anchor_points, press, slow=True)
+                scripts, extra = _side_scripts(plan, object_points, anchor_points, press, slow=True, short=short)
                 extra["cup_raised_m"] = round(float(plan.goal[2, 3] - side.goal[2, 3]), 4)
                 out.append((plan, scripts, SYMMETRIC_ROLLS, extra))
     return out
@@ -1164,12 +1166,32 @@ def _raised_cup(side, object_points: np.ndarray, anchor_points: np.ndarray, cros
 
 def _roofed_entry(scene: ArmScene, object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray,
                   viewpoint: np.ndarray | None, goal_change: dict) -> ExecutionResult | None:
+    """Into a roofed cavity from where the object stands (see :func:`_roofed_attempt`): first with
+    every slide carried to its end; when nothing plans, again with slides that may be let go
+    SLIDE_SHORT early, so an episode that plans in full is carried out as it would be without
+    them. When neither plans, the first attempt's failure. None when no way in is found before
+    planning."""
+    outcome = _roofed_attempt(scene, object_points, anchor_points, cross_pose, viewpoint, goal_change, short=False)
+    if not isinstance(outcome, tuple):
+        return outcome
+    again = _roofed_attempt(scene, object_points, anchor_points, cross_pose, viewpoint, goal_change, short=True)
+    if isinstance(again, ExecutionResult):
+        again.details["slide_let_go_short"] = True
+        return again
+    return _finish(None, *outcome)
+
+
+def _roofed_attempt(scene: ArmScene, object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray,
+                    viewpoint: np.ndarray | None, goal_change: dict,
+                    short: bool) -> ExecutionResult | tuple[ExecutionResult, dict] | None:
     """Into a roofed cavity from where the object stands; when no base placement reaches both the
     pick and the goal, a relay: the object is first carried from above and set down in front of
     the opening (one base), then put in from there (another base: the robot's base moves only
-    while it holds nothing). None when no way in is found before planning."""
+    while it holds nothing). Slides may end early with ``short``. The result of what was carried
+    out; (the failure, what the result records) when nothing planned; None when no way in is
+    found before planning."""
     goal_points = _moved(object_points, cross_pose)
-    entries = _entries(object_points, anchor_points, cross_pose, viewpoint, relayed=False)
+    entries = _entries(object_points, anchor_points, cross_pose, viewpoint, relayed=False, short=short)
     if not entries:
         return None
     extra = dict(entries[0][3])
@@ -1199,7 +1221,7 @@ def _roofed_entry(scene: ArmScene, object_points: np.ndarray, anchor_points: np.
         # and lowered so that the moves' clearance leaves the palm's gap above them.
         floor = _support_floor(anchor_points, around)
         found = False
-        for plan, scripts2, rolls2, extra2 in _entries(relayed, around, then, viewpoint, relayed=True):
+        for plan, scripts2, rolls2, extra2 in _entries(relayed, around, then, viewpoint, relayed=True, short=short):
             found = True
             for script in scripts2:
                 for step in script:
@@ -1238,7 +1260,7 @@ def _roofed_entry(scene: ArmScene, object_points: np.ndarray, anchor_points: np.
             tries.append("into the cavity: no side entry from there")
     extra["relay_spots"] = len(spots)
     extra["relay_failures"] = tries
-    return _finish(None, failed, extra)
+    return failed, extra
 
 
 def execute_free_panda(scene: ArmScene, object_points: np.ndarray, anchor_points: np.ndarray,
