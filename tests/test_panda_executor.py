@@ -317,7 +317,8 @@ def test_an_object_let_go_short_where_the_forearm_stops_the_slide():
         T[:3, 3] = [x, 0.0, z]
         return T
 
-    approach, slide, lower = _line(pose(0.9, 0.5), pose(0.8)), _line(pose(0.8), pose(0.5)), _line(pose(0.5), pose(0.5, 0.27))
+    approach, slide = _line(pose(0.9, 0.5), pose(0.8)), _line(pose(0.8), pose(0.5))
+    lower = _line(pose(0.5), pose(0.5, 0.27))
     slide.release_early = SLIDE_SHORT
     retreat = _line(pose(0.5, 0.27), pose(0.8), check_stall=False)
     script = [Move(pose(0.9, 0.5), np.zeros((1, 3))), approach, slide, lower, ReleaseStep(), retreat]
