@@ -334,6 +334,11 @@ def test_an_object_let_go_short_where_the_forearm_stops_the_slide():
     assert _let_go_earlier(script, 1, len(script), approach.samples + far) is None
     # No release after the slide within the chain: no.
     assert _let_go_earlier(script[:4], 1, 4, approach.samples + stop) is None
+    # A slide allowed to end short only by a second pass: not on the first, and the second would cut it.
+    slide.release_early, slide.release_early_fallback = 0.0, SLIDE_SHORT
+    assert _let_go_earlier(script, 1, len(script), approach.samples + stop) is None
+    assert _let_go_earlier(script, 1, len(script), approach.samples + stop, fallback=True) is not None
+    assert _let_go_earlier(script, 1, len(script), approach.samples + far, fallback=True) is None
 
 
 def test_a_block_slid_into_a_fridge_is_let_go_short_of_the_forearm_and_one_too_deep_fails(place_camera_env):

@@ -144,6 +144,7 @@ class Path:
     check_stall: bool = True
     guarded: bool = False        # stops where the cup first touches something that can move
     release_early: float = 0.0   # m, the arm may stop this far short of the end and let go there
+    release_early_fallback: float = 0.0   # m, as far as a second planning pass allows (see _roofed_entry)
     # A door moved along the piece: its observed points (N, 3) and their motion (4, 4) at u.
     carries: tuple[np.ndarray, Callable[[float], np.ndarray]] | None = None
 
@@ -300,10 +301,12 @@ def _move_timing(q: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.ndarray,
-             allow_rrt: bool) -> tuple[Plan | None, str, str]:
-    """The joint-space plan of ``script`` from ``base``; (None, reason, detail) when it fails."""
+             allow_rrt: bool) -> tuple[Plan | None, str, str, bool]:
+    """The joint-space plan of ``script`` from ``base``; (None, reason, detail, cuttable) when it
+    fails, where ``cuttable`` says the arm gave out in a piece within its ``release_early_fallback``
+    of the end (a second pass that lets the piece end early would plan it differently)."""
     if _held_meets_shoulder(script, base):
-        return None, PLANNING_FAILED, "the held object would meet the arm's shoulder"
+        return None, PLANNING_FAILED, "the held object would meet the arm's shoulder", False
     planner.set_base(base)
     floor = floor_points(base)
     anchor = np.concatenate([anchor, floor])
@@ -323,7 +326,7 @@ def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.nda
         step = script[k]
         if not isinstance(step, Move):
             if isinstance(step, Path):
-                return None, PLANNING_FAILED, "a Cartesian piece without a move before it"
+                return None, PLANNING_FAILED, "a Cartesian piece without a move before it", False
             plan.steps.append(step)
             k += 1
             continue
@@ -336,10 +339,10 @@ def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.nda
         planner.set_cloud(np.concatenate([step.obstacles, floor]), MOVE_CLEARANCE)
         touching = planner.collisions(q, ARM_LINKS + HAND_LINKS)
         if touching:
-            return None, PLANNING_FAILED, f"the arm's start pose touches the observed scene ({', '.join(touching)})"
+            return None, PLANNING_FAILED, f"the arm's start pose touches the observed scene ({', '.join(touching)})", False
         goals = planner.ik(step.tcp, _ik_seeds(), ARM_LINKS + HAND_LINKS)
         if not goals:
-            return None, UNREACHABLE, "no collision-free IK solution for the pre-grasp pose"
+            return None, UNREACHABLE, "no collision-free IK solution for the pre-grasp pose", False
         planner.set_cloud(anchor, ARM_CLEARANCE)
         chain = why = None
         furthest = None
@@ -363,20 +366,21 @@ def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.nda
             shorter = _let_go_earlier(script, k + 1, j, furthest.get("index", 0))
             if shorter is not None:
                 return _plan_at(planner, base, shorter, anchor[:len(anchor) - len(floor)], allow_rrt)
+            cuttable = _let_go_earlier(script, k + 1, j, furthest.get("index", 0), fallback=True) is not None
             why = furthest
             reason = PLANNING_FAILED if why.get("why") == "collision" else UNREACHABLE
             links = f": {', '.join(why['links'])}" if why.get("links") else ""
             return None, reason, (f"the arm cannot follow the path ({why.get('why')}{links} at pose "
-                                  f"{why.get('index')} of {len(tcps)})")
+                                  f"{why.get('index')} of {len(tcps)})"), cuttable
         planner.set_cloud(np.concatenate([step.obstacles, floor]), MOVE_CLEARANCE)
         if planner.line_clear(q, chain[0], ARM_LINKS + HAND_LINKS):
             joint_path = np.stack([q, chain[0]])
         else:
             if not allow_rrt:
-                return None, PLANNING_FAILED, "no straight collision-free move to the pre-grasp pose"
+                return None, PLANNING_FAILED, "no straight collision-free move to the pre-grasp pose", False
             joint_path = planner.rrt(q, chain[0], RRT_SECONDS)
             if joint_path is None:
-                return None, PLANNING_FAILED, "RRTConnect found no collision-free move to the pre-grasp pose"
+                return None, PLANNING_FAILED, "RRTConnect found no collision-free move to the pre-grasp pose", False
         samples, seconds = _move_timing(joint_path)
         plan.steps.append(Segment(samples, seconds, None, True))
         start = 0
@@ -390,7 +394,7 @@ def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.nda
                 plan.steps.append(s)
         q = chain[-1]
         k = j
-    return plan, "", ""
+    return plan, "", "", False
 
 
 def _piece_timing(q: np.ndarray) -> tuple[np.ndarray, float]:
@@ -457,10 +461,10 @@ def _arm_meets_door(planner: ArmPlanner, steps: list, chain: np.ndarray) -> dict
     return None
 
 
-def _let_go_earlier(script: list, first: int, end: int, failed_at: int) -> list | None:
+def _let_go_earlier(script: list, first: int, end: int, failed_at: int, fallback: bool = False) -> list | None:
     """``script`` with the piece among ``script[first:end]`` in which the chain failed at pose
-    ``failed_at`` cut at the pose before, when that piece may end early (``release_early``) by
-    what is left of it; the pieces between it and the release that follows are left out (the
+    ``failed_at`` cut at the pose before, when that piece may end early (``release_early``, or
+    ``release_early_fallback`` with ``fallback``) by what is left of it; the pieces between it and the release that follows are left out (the
     object is let go where the cut piece now ends) and the retreat after the release starts
     there. None when it may not, or when no release follows before ``end``."""
     start = 0
@@ -470,10 +474,11 @@ def _let_go_earlier(script: list, first: int, end: int, failed_at: int) -> list 
             continue
         if start <= failed_at < start + piece.samples:
             last = failed_at - start - 1
-            if piece.release_early <= 0 or last < 0:
+            allowed = piece.release_early_fallback if fallback else piece.release_early
+            if allowed <= 0 or last < 0:
                 return None
             end_pose = piece.sampled[last]
-            if np.linalg.norm(piece.sampled[-1][:3, 3] - end_pose[:3, 3]) > piece.release_early:
+            if np.linalg.norm(piece.sampled[-1][:3, 3] - end_pose[:3, 3]) > allowed:
                 return None
             out = list(script)
             if last >= 1:
@@ -497,11 +502,12 @@ def _let_go_earlier(script: list, first: int, end: int, failed_at: int) -> list 
 
 
 def plan_script(planner: ArmPlanner, scripts: list[list], anchor: np.ndarray, obstacles: np.ndarray,
-                grasp_point: np.ndarray) -> tuple[Plan | None, str, str, int]:
+                grasp_point: np.ndarray) -> tuple[Plan | None, str, str, int, bool]:
     """Try base placements in order, and at each the scripts in order (the same path with the
     TCP rolled about its approach); straight moves first, then RRT on the first few
-    placements that reach the path. Returns (plan or None, reason, detail, placements tried);
-    ``plan.script_index`` says which script was planned."""
+    placements that reach the path. Returns (plan or None, reason, detail, placements tried,
+    whether some failure was ``cuttable`` as :func:`_plan_at` says); ``plan.script_index`` says
+    which script was planned."""
     tcps = []
     for s in scripts[0]:
         if isinstance(s, Move):
@@ -510,30 +516,33 @@ def plan_script(planner: ArmPlanner, scripts: list[list], anchor: np.ndarray, ob
             tcps.extend([s.sampled[0], s.sampled[-1]])
     candidates = base_candidates(anchor, obstacles, np.stack(tcps), grasp_point)
     if not candidates:
-        return None, UNREACHABLE, "no free floor in front of or beside the furniture within the arm's reach of the path", 0
+        return None, UNREACHABLE, "no free floor in front of or beside the furniture within the arm's reach of the path", 0, False
     reasons = []
+    cuttable = False
     retry = []
     for n, base in enumerate(candidates, start=1):
         for index, script in enumerate(scripts):
-            plan, reason, detail = _plan_at(planner, base, script, anchor, allow_rrt=False)
+            plan, reason, detail, cut = _plan_at(planner, base, script, anchor, allow_rrt=False)
             if plan is not None:
                 plan.script_index = index
-                return plan, "", "", n
+                return plan, "", "", n, cuttable
             reasons.append((reason, detail))
+            cuttable = cuttable or cut
             if reason == PLANNING_FAILED and detail.startswith("no straight"):
                 retry.append((base, index))
     for base, index in retry[:MAX_RRT_CANDIDATES]:
-        plan, reason, detail = _plan_at(planner, base, scripts[index], anchor, allow_rrt=True)
+        plan, reason, detail, cut = _plan_at(planner, base, scripts[index], anchor, allow_rrt=True)
         if plan is not None:
             plan.script_index = index
-            return plan, "", "", len(candidates)
+            return plan, "", "", len(candidates), cuttable
         reasons.append((reason, detail))
+        cuttable = cuttable or cut
     # The most telling reason: a placement that reached the poses but found no clear way.
     for wanted in (PLANNING_FAILED, UNREACHABLE):
         hits = [d for r, d in reasons if r == wanted]
         if hits:
-            return None, wanted, f"{hits[0]} (all {len(candidates)} base placements failed)", len(candidates)
-    return None, UNREACHABLE, "no base placement reaches the path", len(candidates)
+            return None, wanted, f"{hits[0]} (all {len(candidates)} base placements failed)", len(candidates), cuttable
+    return None, UNREACHABLE, "no base placement reaches the path", len(candidates), cuttable
 
 
 # ---------------------------------------------------------------------------- execution
@@ -660,12 +669,15 @@ def _finish(run: _Runner | None, result: ExecutionResult, extra: dict) -> Execut
 
 def _plan(scene: ArmScene, scripts: list[list], anchor: np.ndarray, obstacles: np.ndarray, grasp_point: np.ndarray,
           extra: dict) -> tuple[Plan | None, ExecutionResult | None]:
-    """(plan, None), or (None, the failure as a result) when no base placement works."""
+    """(plan, None), or (None, the failure as a result) when no base placement works; ``extra``
+    records ``slide_failed_near_end`` when some placement's arm gave out near a slide's end."""
     try:
-        plan, reason, detail, tried = plan_script(scene.planner, scripts, anchor, obstacles, grasp_point)
+        plan, reason, detail, tried, cuttable = plan_script(scene.planner, scripts, anchor, obstacles, grasp_point)
     except PlannerError as err:
-        plan, reason, detail, tried = None, PLANNING_FAILED, str(err), 0
+        plan, reason, detail, tried, cuttable = None, PLANNING_FAILED, str(err), 0, False
     extra["placements_tried"] = extra.get("placements_tried", 0) + tried
+    if cuttable:
+        extra["slide_failed_near_end"] = True
     if plan is None:
         return None, ExecutionResult(ok=False, reason=reason, detail=detail)
     return plan, None
@@ -951,6 +963,7 @@ def _side_scripts(plan, object_points: np.ndarray, anchor_points: np.ndarray,
         # The slide before it, when allowed: where the forearm meets the furniture near its end, the
         # object is let go there, nearer the opening than predicted; the goal region still decides.
         script[-2].release_early = SLIDE_SHORT if short else 0.0
+        script[-2].release_early_fallback = SLIDE_SHORT
         script += _retreat(way[-1], plan.goal[:3, 2], plan.retreat())
         scripts.append(script)
     return scripts, extra
@@ -1167,13 +1180,16 @@ def _raised_cup(side, object_points: np.ndarray, anchor_points: np.ndarray, cros
 def _roofed_entry(scene: ArmScene, object_points: np.ndarray, anchor_points: np.ndarray, cross_pose: np.ndarray,
                   viewpoint: np.ndarray | None, goal_change: dict) -> ExecutionResult | None:
     """Into a roofed cavity from where the object stands (see :func:`_roofed_attempt`): first with
-    every slide carried to its end; when nothing plans, again with slides that may be let go
-    SLIDE_SHORT early, so an episode that plans in full is carried out as it would be without
-    them. When neither plans, the first attempt's failure. None when no way in is found before
-    planning."""
+    every slide carried to its end; when nothing plans and some arm gave out within SLIDE_SHORT of
+    a slide's end, again with slides that may be let go that early, so an episode that plans in
+    full is carried out as it would be without them. When neither plans, the first attempt's
+    failure. None when no way in is found before planning."""
     outcome = _roofed_attempt(scene, object_points, anchor_points, cross_pose, viewpoint, goal_change, short=False)
     if not isinstance(outcome, tuple):
         return outcome
+    if not outcome[1].get("slide_failed_near_end"):
+        # The second pass would meet every failure of the first where it met it.
+        return _finish(None, *outcome)
     again = _roofed_attempt(scene, object_points, anchor_points, cross_pose, viewpoint, goal_change, short=True)
     if isinstance(again, ExecutionResult):
         again.details["slide_let_go_short"] = True
