@@ -339,7 +339,8 @@ def _plan_at(planner: ArmPlanner, base: np.ndarray, script: list, anchor: np.nda
         planner.set_cloud(np.concatenate([step.obstacles, floor]), MOVE_CLEARANCE)
         touching = planner.collisions(q, ARM_LINKS + HAND_LINKS)
         if touching:
-            return None, PLANNING_FAILED, f"the arm's start pose touches the observed scene ({', '.join(touching)})", False
+            return (None, PLANNING_FAILED, f"the arm's start pose touches the observed scene ({', '.join(touching)})",
+                    False)
         goals = planner.ik(step.tcp, _ik_seeds(), ARM_LINKS + HAND_LINKS)
         if not goals:
             return None, UNREACHABLE, "no collision-free IK solution for the pre-grasp pose", False
@@ -464,9 +465,10 @@ def _arm_meets_door(planner: ArmPlanner, steps: list, chain: np.ndarray) -> dict
 def _let_go_earlier(script: list, first: int, end: int, failed_at: int, fallback: bool = False) -> list | None:
     """``script`` with the piece among ``script[first:end]`` in which the chain failed at pose
     ``failed_at`` cut at the pose before, when that piece may end early (``release_early``, or
-    ``release_early_fallback`` with ``fallback``) by what is left of it; the pieces between it and the release that follows are left out (the
-    object is let go where the cut piece now ends) and the retreat after the release starts
-    there. None when it may not, or when no release follows before ``end``."""
+    ``release_early_fallback`` with ``fallback``) by what is left of it; the pieces between it
+    and the release that follows are left out (the object is let go where the cut piece now
+    ends) and the retreat after the release starts there. None when it may not, or when no
+    release follows before ``end``."""
     start = 0
     for n in range(first, end):
         piece = script[n]
@@ -516,7 +518,8 @@ def plan_script(planner: ArmPlanner, scripts: list[list], anchor: np.ndarray, ob
             tcps.extend([s.sampled[0], s.sampled[-1]])
     candidates = base_candidates(anchor, obstacles, np.stack(tcps), grasp_point)
     if not candidates:
-        return None, UNREACHABLE, "no free floor in front of or beside the furniture within the arm's reach of the path", 0, False
+        return (None, UNREACHABLE, "no free floor in front of or beside the furniture within the arm's reach of the path",
+                0, False)
     reasons = []
     cuttable = False
     retry = []
