@@ -19,6 +19,11 @@ A policy that cannot see the stop regresses to that middle, so the middle is wha
 must pass. Common real stops (90-105 deg) are below the range and are reached by
 clamping. In-region: the compartment behind the
 target door (the half behind it for two doors) whose middle is nearest reach height.
+
+Part-door cabinet (extra training instances only, :func:`build_training_variety`): a taller
+carcass split by a divider into a section behind the target door(s) and a neighbour section
+above or below it (an open shelf, drawers or another door). In-region: a compartment behind
+the target door, so a goal's height cannot be told from the floor alone.
 """
 
 from __future__ import annotations
