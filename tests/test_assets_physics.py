@@ -1,7 +1,8 @@
 """Procedural furniture in SAPIEN physics (no renderer): cavities hold a block, closed doors stay shut.
 
-For every category (and each kind of the training variety's part-door cabinet), one generated object is loaded with SAPIEN's URDF loader; an 8 cm,
-0.1 kg block dropped into the open cavity must come to rest inside the in-region,
+For every category, and each kind of the training variety's part-door cabinet, one
+generated object is loaded with SAPIEN's URDF loader; an 8 cm, 0.1 kg block dropped
+into the open cavity must come to rest inside the in-region,
 and a closed door or drawer left without any drive must not be pushed open by
 contacts with the body.
 """
