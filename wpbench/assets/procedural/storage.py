@@ -217,33 +217,41 @@ def _region_behind_door(inside: np.ndarray, xf: float, two_doors: bool, target_h
 
 def build_door_cabinet(rng: np.random.Generator, object_id: str, ranges: StorageRanges = StorageRanges()) -> Blueprint:
     carcass = _storage_carcass(rng, object_id, ranges, drawer_wall=False)
-    b, W, wall, door_t, xf, base_h, inside = (carcass.b, carcass.W, carcass.wall, carcass.front_t, carcass.xf,
-                                              carcass.base_h, carcass.inside)
-    shelf_bottoms, (lo, hi) = _shelved_goal_compartment(rng, object_id, carcass, inside[0, 2], inside[1, 2], 3, ranges)
-    door_specs = _target_door_specs(rng, W, door_t, (base_h, base_h + carcass.H), ranges)
+    inside = carcass.inside
+    shelf_bottoms, goal_z = _shelved_goal_compartment(rng, object_id, carcass, inside[0, 2], inside[1, 2], 3, ranges)
+    door_specs = _target_door_specs(rng, carcass.W, carcass.front_t, (carcass.base_h, carcass.base_h + carcass.H),
+                                    ranges)
     two_doors = len(door_specs) == 2
-
     open_angle = round(float(np.deg2rad(rng.uniform(*ranges.door_open_deg))), 4)
     handle_kind = choose(rng, P.HANDLE_KINDS)
+    return _hang_doors(rng, carcass, door_specs, two_doors, open_angle, handle_kind, goal_z, ranges,
+                       {"style": "door_cabinet", "shelves": len(shelf_bottoms)})
+
+
+def _hang_doors(rng: np.random.Generator, carcass: _Carcass, door_specs: list[P.DoorSpec], two_doors: bool,
+                open_angle: float, handle_kind: P.HandleKind, goal_z: tuple[float, float], ranges: StorageRanges,
+                extra: dict) -> Blueprint:
+    """Hang ``door_specs`` on the carcass (``two_doors``: the target is one of two side by side) and return the
+    cabinet's blueprint, its goal the space behind the target door between heights ``goal_z``; ``extra`` adds
+    to the description every door cabinet has."""
     handle_at = 0.8 if rng.random() < 0.5 else 0.5  # fraction of the door's height, the same on every door
     masses = [uniform(rng, *ranges.door_mass) for _ in door_specs]  # drawn in door order
     link, joint, target_hinge, handle = P.add_side_hinged_doors_with_handles(
-        b, door_specs, masses, xf, door_t, FRONT_GAP, carcass.front_colour, open_angle, handle_kind, carcass.metal,
-        handle_height=(handle_at, handle_at), handle_length=(0.4, 0.25), standoff=0.03, radius=0.007)
-
-    in_region = _region_behind_door(inside, xf, two_doors, target_hinge, lo, hi)
-    extra = {
-        "style": "door_cabinet",
+        carcass.b, door_specs, masses, carcass.xf, carcass.front_t, FRONT_GAP, carcass.front_colour, open_angle,
+        handle_kind, carcass.metal, handle_height=(handle_at, handle_at), handle_length=(0.4, 0.25), standoff=0.03,
+        radius=0.007)
+    in_region = _region_behind_door(carcass.inside, carcass.xf, two_doors, target_hinge, *goal_z)
+    description = {
         "hinge": target_hinge,
         "doors": len(door_specs),
-        "shelves": len(shelf_bottoms),
         "handle_type": handle.kind,
         "handle_grasp_point": list(handle.grasp_point),
         "on_legs": carcass.on_legs,
-        "wall_thickness": wall,
-        "door_thickness": door_t,
+        "wall_thickness": carcass.wall,
+        "door_thickness": carcass.front_t,
+        **extra,
     }
-    return Blueprint(b.model(), link, joint, "revolute", open_angle, in_region, extra)
+    return Blueprint(carcass.b.model(), link, joint, "revolute", open_angle, in_region, description)
 
 
 PART_DOOR_NEIGHBOURS = ("open", "drawers", "door")
@@ -254,8 +262,7 @@ def build_part_door_cabinet(rng: np.random.Generator, object_id: str, ranges: St
     neighbour section: an open shelf, one or two drawers, or another door. The goal is a compartment behind the
     target door, so its height follows the door, not the floor."""
     carcass = _storage_carcass(rng, object_id, replace(ranges, height=ranges.part_door_height), drawer_wall=True)
-    b, W, wall, door_t, xf, base_h, inside = (carcass.b, carcass.W, carcass.wall, carcass.front_t, carcass.xf,
-                                              carcass.base_h, carcass.inside)
+    b, W, wall, xf, base_h, inside = carcass.b, carcass.W, carcass.wall, carcass.xf, carcass.base_h, carcass.inside
     z_bottom, z_top = inside[0, 2], inside[1, 2]
     section_min = max(ranges.min_compartment, ranges.min_opening)
     room = z_top - z_bottom - wall  # both sections, without the divider
@@ -273,8 +280,8 @@ def build_part_door_cabinet(rng: np.random.Generator, object_id: str, ranges: St
     door_section, other_section = (below, above) if door_below else (above, below)
     door_z, other_z = (fronts_below, fronts_above) if door_below else (fronts_above, fronts_below)
 
-    shelf_bottoms, (lo, hi) = _shelved_goal_compartment(rng, object_id, carcass, *door_section, 1, ranges)
-    door_specs = _target_door_specs(rng, W, door_t, door_z, ranges)
+    shelf_bottoms, goal_z = _shelved_goal_compartment(rng, object_id, carcass, *door_section, 1, ranges)
+    door_specs = _target_door_specs(rng, W, carcass.front_t, door_z, ranges)
     two_doors = len(door_specs) == 2
     neighbour = PART_DOOR_NEIGHBOURS[int(rng.integers(len(PART_DOOR_NEIGHBOURS)))]
     handle_kind = choose(rng, P.HANDLE_KINDS)
@@ -286,27 +293,9 @@ def build_part_door_cabinet(rng: np.random.Generator, object_id: str, ranges: St
         _add_drawer_rows(rng, carcass, other_section, other_z, handle_kind, ranges)
 
     open_angle = round(float(np.deg2rad(rng.uniform(*ranges.door_open_deg))), 4)
-    handle_at = 0.8 if rng.random() < 0.5 else 0.5
-    masses = [uniform(rng, *ranges.door_mass) for _ in door_specs]
-    link, joint, target_hinge, handle = P.add_side_hinged_doors_with_handles(
-        b, door_specs, masses, xf, door_t, FRONT_GAP, carcass.front_colour, open_angle, handle_kind, carcass.metal,
-        handle_height=(handle_at, handle_at), handle_length=(0.4, 0.25), standoff=0.03, radius=0.007)
-
-    in_region = _region_behind_door(inside, xf, two_doors, target_hinge, lo, hi)
-    extra = {
-        "style": "part_door_cabinet",
-        "door_section": "below" if door_below else "above",
-        "neighbour": neighbour,
-        "hinge": target_hinge,
-        "doors": len(door_specs),
-        "shelves": len(shelf_bottoms),
-        "handle_type": handle.kind,
-        "handle_grasp_point": list(handle.grasp_point),
-        "on_legs": carcass.on_legs,
-        "wall_thickness": wall,
-        "door_thickness": door_t,
-    }
-    return Blueprint(b.model(), link, joint, "revolute", open_angle, in_region, extra)
+    return _hang_doors(rng, carcass, door_specs, two_doors, open_angle, handle_kind, goal_z, ranges,
+                       {"style": "part_door_cabinet", "shelves": len(shelf_bottoms), "neighbour": neighbour,
+                        "door_section": "below" if door_below else "above"})
 
 
 def _add_drawer_rows(rng: np.random.Generator, carcass: _Carcass, section: tuple[float, float],
