@@ -1,8 +1,7 @@
 """Procedural furniture in SAPIEN physics (no renderer): cavities hold a block, closed doors stay shut.
 
-For every category, and each kind of the training variety's part-door cabinet, one
-generated object is loaded with SAPIEN's URDF loader; an 8 cm, 0.1 kg block dropped
-into the open cavity must come to rest inside the in-region,
+For every category, one generated object is loaded with SAPIEN's URDF loader; an 8 cm,
+0.1 kg block dropped into the open cavity must come to rest inside the in-region,
 and a closed door or drawer left without any drive must not be pushed open by
 contacts with the body.
 """
@@ -15,30 +14,17 @@ import pytest
 
 sapien = pytest.importorskip("sapien")
 
-from wpbench.assets.procedural import CATEGORIES, build_blueprint, generate_object  # noqa: E402
-from wpbench.assets.procedural.storage import PART_DOOR_NEIGHBOURS  # noqa: E402
+from wpbench.assets.procedural import CATEGORIES, generate_object  # noqa: E402
 from wpbench.assets.spec import FurnitureAsset  # noqa: E402
 
 TIMESTEP = 1 / 240
 BLOCK_HALF = 0.04
 
 
-# The training variety's cabinets with a door over part of the carcass, one per neighbour section.
-PART_DOOR = tuple(f"storage part-door {n}" for n in PART_DOOR_NEIGHBOURS)
-FURNITURE = CATEGORIES + PART_DOOR
-
-
 @pytest.fixture(scope="module")
 def assets(tmp_path_factory) -> dict[str, FurnitureAsset]:
     out = tmp_path_factory.mktemp("physics_lib")
-    found = {c: generate_object(c, 0, out, seed=0) for c in CATEGORIES}
-    for index in range(16, 200):
-        extra = build_blueprint("storage", index, seed=0, training_variety=True).extra
-        name = f"storage part-door {extra.get('neighbour')}"
-        if name in PART_DOOR and name not in found:
-            found[name] = generate_object("storage", index, out, seed=0, training_variety=True)
-    assert set(found) == set(FURNITURE)
-    return found
+    return {c: generate_object(c, 0, out, seed=0) for c in CATEGORIES}
 
 
 def physics_scene():
@@ -94,7 +80,7 @@ def region_to_world(asset: FurnitureAsset, art) -> tuple[np.ndarray, np.ndarray]
     return pose[:3, :3], pose[:3, 3]
 
 
-@pytest.mark.parametrize("category", FURNITURE)
+@pytest.mark.parametrize("category", CATEGORIES)
 def test_block_dropped_into_open_cavity_rests_inside(assets, category):
     asset = assets[category]
     scene = physics_scene()
@@ -132,7 +118,7 @@ def test_block_dropped_into_open_cavity_rests_inside(assets, category):
     assert abs(art.get_qpos()[k] - asset.open_qpos) < 0.05
 
 
-@pytest.mark.parametrize("category", FURNITURE)
+@pytest.mark.parametrize("category", CATEGORIES)
 def test_closed_door_without_drive_stays_closed(assets, category):
     asset = assets[category]
     scene = physics_scene()

@@ -47,16 +47,16 @@ def procedural_library(seed: int = 0, per_category: int = 16, cache_dir: Path | 
 
     ``cache_dir`` replaces ``cache_root()``; the library goes to
     ``<cache>/procedural/seed-<seed>-n<per_category>-v<generator version>`` plus
-    ``-x<extra_train>w<training variety version>`` with extra training instances (same
-    val split, more and more varied train furniture) and ``-t<test_per_category>`` (default ``TEST_PER_CATEGORY``) with test
+    ``-x<extra_train>`` with extra training instances (same val split, more train
+    furniture) and ``-t<test_per_category>`` (default ``TEST_PER_CATEGORY``) with test
     instances.
     """
-    from wpbench.assets.procedural import GENERATOR_VERSION, TEST_PER_CATEGORY, TRAINING_VARIETY_VERSION, generate_library
+    from wpbench.assets.procedural import GENERATOR_VERSION, TEST_PER_CATEGORY, generate_library
 
     tests = TEST_PER_CATEGORY if test_per_category is None else int(test_per_category)
     root = Path(cache_dir) if cache_dir is not None else cache_root()
-    extra = f"-x{int(extra_train)}w{TRAINING_VARIETY_VERSION}" if extra_train else ""
-    name = f"seed-{int(seed)}-n{int(per_category)}-v{GENERATOR_VERSION}{extra}" + (f"-t{tests}" if tests else "")
+    name = (f"seed-{int(seed)}-n{int(per_category)}-v{GENERATOR_VERSION}" + (f"-x{int(extra_train)}" if extra_train else "")
+            + (f"-t{tests}" if tests else ""))
     folder = root / "procedural" / name
     if (folder / "split.json").is_file():
         return folder

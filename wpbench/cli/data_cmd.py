@@ -38,9 +38,8 @@ def generate(
     num_action_points: int = typer.Option(256, min=8, help="Action-object points per sample."),
     num_anchor_points: int = typer.Option(1024, min=8, help="Anchor-object points per sample."),
     extra_train_instances: int = typer.Option(
-        0, min=0, help="Train split only: this many more procedural furniture instances per category, with "
-        "more variety than the benchmark's (storage adds cabinets with a door over part of the carcass); the val "
-        "and test instances are unchanged and never trained on."),
+        0, min=0, help="Train split only: this many more procedural furniture instances per category "
+        "(the val instances are unchanged and never trained on)."),
     assets: str = typer.Option("procedural", help="'procedural' (built-in furniture) or a folder of your own "
                                "PartNet-Mobility objects split with `wpbench assets split`."),
     progress: bool = typer.Option(True, help="Show a progress bar."),

@@ -93,10 +93,6 @@ class GenerationConfig:
             d.pop(key)
         if not d["extra_train_instances"]:
             d.pop("extra_train_instances")  # data made before the option existed keeps its fingerprint
-        else:  # extra instances built by another training variety are other furniture
-            from wpbench.assets.procedural import generate
-
-            d["training_variety_version"] = generate.TRAINING_VARIETY_VERSION
         if not d["camera_noise"]:
             d.pop("camera_noise")  # likewise: a clean camera is what older data saw
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]

@@ -12,11 +12,9 @@ from wpbench.assets.procedural.generate import (
     GENERATOR_VERSION,
     TEST_FIRST_INDEX,
     TEST_PER_CATEGORY,
-    TRAINING_VARIETY_VERSION,
     build_blueprint,
     generate_library,
     generate_object,
 )
 
-__all__ = ["CATEGORIES", "GENERATOR_VERSION", "TEST_FIRST_INDEX", "TEST_PER_CATEGORY", "TRAINING_VARIETY_VERSION",
-           "build_blueprint", "generate_library", "generate_object"]
+__all__ = ["CATEGORIES", "GENERATOR_VERSION", "TEST_FIRST_INDEX", "TEST_PER_CATEGORY", "build_blueprint", "generate_library", "generate_object"]

@@ -7,8 +7,6 @@ the same seed writes byte-identical files.
 Indices ``0 .. per_category - 1`` are train then val, extra training instances follow
 them, and test instances are numbered from :data:`TEST_FIRST_INDEX`, which no train or
 val index may reach: a test instance is never one that was trained or selected on.
-Extra training instances of a category in :data:`TRAINING_VARIETY` come from its wider
-builder there, so training can see furniture the benchmark's splits do not hold.
 """
 
 from __future__ import annotations
@@ -38,16 +36,6 @@ BUILDERS: dict[str, Callable[[np.random.Generator, str], Blueprint]] = {
 }
 CATEGORIES: tuple[str, ...] = tuple(BUILDERS)
 
-# Builders of the extra training instances where they differ from BUILDERS: a superset of
-# what BUILDERS makes, so training covers the benchmark's furniture and more.
-TRAINING_VARIETY: dict[str, Callable[[np.random.Generator, str], Blueprint]] = {
-    "storage": storage.build_training_variety,
-}
-# Bump when a change to TRAINING_VARIETY changes the extra training instances it writes;
-# val, test and the first per_category instances depend on GENERATOR_VERSION alone.
-# 1: extra instances built by BUILDERS; 2: storage adds cabinets with a door over part of the carcass.
-TRAINING_VARIETY_VERSION = 2
-
 # Test instances are numbered from here; per_category + extra_train may not reach it.
 TEST_FIRST_INDEX = 9000
 # Test instances per category in the built-in library.
@@ -68,20 +56,17 @@ def object_id(category: str, index: int) -> str:
     return f"{category}-{index:04d}"
 
 
-def build_blueprint(category: str, index: int, seed: int = 0, training_variety: bool = False) -> Blueprint:
-    """Build (in memory, nothing written) instance ``index`` of ``category``; ``training_variety`` builds it
-    as an extra training instance (:data:`TRAINING_VARIETY`)."""
+def build_blueprint(category: str, index: int, seed: int = 0) -> Blueprint:
+    """Build (in memory, nothing written) instance ``index`` of ``category``."""
     check_category(category)
-    builder = TRAINING_VARIETY.get(category, BUILDERS[category]) if training_variety else BUILDERS[category]
-    bp = builder(instance_rng(seed, category, index), object_id(category, index))
+    bp = BUILDERS[category](instance_rng(seed, category, index), object_id(category, index))
     check_blueprint(bp)
     return bp
 
 
-def generate_object(category: str, index: int, out: Path, seed: int = 0, split: str | None = None,
-                    training_variety: bool = False) -> FurnitureAsset:
+def generate_object(category: str, index: int, out: Path, seed: int = 0, split: str | None = None) -> FurnitureAsset:
     """Write one object into ``out/<category>-<index>/`` and return its asset description."""
-    bp = build_blueprint(category, index, seed, training_variety)
+    bp = build_blueprint(category, index, seed)
     folder = Path(out) / bp.model.name
     urdf = write_model(bp.model, folder)
     low, high = bp.model.bounds()
@@ -110,8 +95,6 @@ def generate_object(category: str, index: int, out: Path, seed: int = 0, split: 
     asset.save(folder / "wpbench.json")
     meta = {"category": category, "id": bp.model.name, "seed": int(seed), "index": int(index),
             "generator": "wpbench.assets.procedural", "generator_version": GENERATOR_VERSION}
-    if training_variety and category in TRAINING_VARIETY:
-        meta["training_variety_version"] = TRAINING_VARIETY_VERSION
     (folder / "meta.json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
     return asset
 
@@ -160,11 +143,10 @@ def generate_library(
 
     ``split.json`` = {"train": [ids], "val": [ids], "test": [ids], "seed": S,
     "per_category": N, "val_per_category": V, "extra_train": X, "test_per_category": T,
-    "test_first_index": I, "generator_version": G, "training_variety_version": V, "categories": [...]}.
+    "test_first_index": I, "generator_version": G, "categories": [...]}.
     ``extra_train``: further training instances per category, numbered after the
-    first ``per_category`` and built with :data:`TRAINING_VARIETY` (an instance does not
-    depend on the library size, so the val instances stay exactly those of the library
-    without them).
+    first ``per_category`` (an instance does not depend on the library size, so the
+    val instances stay exactly those of the library without them).
     ``test_per_category``: held-out test instances per category, numbered from
     :data:`TEST_FIRST_INDEX` (they leave every train and val instance unchanged).
     ``progress`` optionally wraps the job list (e.g. ``tqdm``).
@@ -189,8 +171,7 @@ def generate_library(
     jobs = [(c, i) for c in categories for i in indices]
     assets = []
     for c, i in progress(jobs) if progress else jobs:
-        extra = per_category <= i < TEST_FIRST_INDEX
-        assets.append(generate_object(c, i, out, seed, split_of(i, per_category, val_per_category), training_variety=extra))
+        assets.append(generate_object(c, i, out, seed, split_of(i, per_category, val_per_category)))
     split = {
         "train": [a.object_id for a in assets if a.split == "train"],
         "val": [a.object_id for a in assets if a.split == "val"],
@@ -203,7 +184,6 @@ def generate_library(
         "test_first_index": TEST_FIRST_INDEX,
         "categories": list(categories),
         "generator_version": GENERATOR_VERSION,
-        "training_variety_version": TRAINING_VARIETY_VERSION,
     }
     (out / "split.json").write_text(json.dumps(split, indent=2, sort_keys=True) + "\n")
     return assets
